@@ -1,0 +1,1 @@
+//! ⑤ Act: differential drive and one rapier physics world per map.

@@ -1,0 +1,1 @@
+//! ④ Agent: the action component and the policies that write it.

@@ -1,0 +1,1 @@
+//! The `apfn` command line: one file per subcommand.

@@ -1,0 +1,1 @@
+//! Composition: the system registry, schedule files (systems/*.ron) and scene files (scenes/*.ron).

@@ -1,0 +1,1 @@
+//! Episode bookkeeping: resets, per-step errors and metrics.

@@ -1,0 +1,23 @@
+//! apfn: active robot localization on bevy_ecs.
+//!
+//! The stages, in dataflow order: the `world` (maps, robots), `sense` (LiDAR, occupancy grid,
+//! depth, odometry), `particles` (the filter), `agent` (policies), `act` (drive and physics),
+//! then `episode` bookkeeping; `compose` turns RON files into schedules; `cli` is the binary's.
+
+pub mod world;
+
+pub mod sense;
+
+pub mod particles;
+
+pub mod agent;
+
+pub mod act;
+
+pub mod episode;
+
+pub mod compose;
+
+pub mod cli;
+
+pub mod testing;

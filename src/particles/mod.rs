@@ -1,0 +1,1 @@
+//! ② Particles: the particle set and the filter steps (init, transition, likelihood, resampling, estimate).

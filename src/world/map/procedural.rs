@@ -1,0 +1,1 @@
+//! Seeded procedural apartments: the embedded default maps, in disjoint seen and unseen seed ranges.
