@@ -1,1 +1,7 @@
-//! ④ Agent: the action component and the policies that write it.
+//! ④ Agent: the normalised `Action` component and the policies (systems) that write it.
+
+mod action;
+mod random;
+
+pub use action::Action;
+pub use random::random_policy;
