@@ -1,0 +1,12 @@
+//! Seeded procedural apartments, the embedded default maps: a floor plan from recursive binary
+//! space partitioning (rooms, corridor or open plan, doors), then furniture that never blocks a
+//! door or cuts a room in two. Training ("seen") and test ("unseen") maps use disjoint seed ranges.
+
+mod apartment;
+mod furniture;
+mod params;
+mod rect;
+mod rooms;
+
+pub use apartment::generate_apartment;
+pub use params::{ApartmentParams, ApartmentParamsError, SEEN_SEEDS, Split, UNSEEN_SEEDS};
