@@ -26,27 +26,44 @@ pub fn plan_path(
     Some(cells.into_iter().map(|(i, j)| map.cell_center(i, j)).collect())
 }
 
-/// The A* kernel on cell indices; `start` and `goal` must be traversable.
+/// The A* kernel on cell indices: the cells from `start` to `goal`, or `None` when either is not
+/// traversable or no path exists.
 pub fn plan_cells(
     trav: &TraversableMap,
     start: (usize, usize),
     goal: (usize, usize),
 ) -> Option<Vec<(usize, usize)>> {
-    let w = trav.width;
-    let index = |(i, j): (usize, usize)| j * w + i;
+    if !trav.is_traversable(start.0, start.1) || !trav.is_traversable(goal.0, goal.1) {
+        return None;
+    }
+    // Work on a copy padded by one blocked cell all round: neighbour lookups need no bounds checks.
+    let (w, h) = (trav.width + 2, trav.height + 2);
+    let mut open_cell = vec![false; w * h];
+    for (j, row) in trav.traversable.chunks_exact(trav.width.max(1)).enumerate() {
+        open_cell[(j + 1) * w + 1..(j + 1) * w + 1 + trav.width].copy_from_slice(row);
+    }
+    let index = |(i, j): (usize, usize)| (j + 1) * w + i + 1;
     let (s, g) = (index(start), index(goal));
+    let (gi, gj) = (g % w, g / w);
     let heuristic = |k: usize| {
-        let (dx, dy) = ((k % w).abs_diff(goal.0) as f32, (k / w).abs_diff(goal.1) as f32);
+        let (dx, dy) = ((k % w).abs_diff(gi) as f32, (k / w).abs_diff(gj) as f32);
         dx.max(dy) + (SQRT_2 - 1.0) * dx.min(dy)
     };
-    let mut cost = vec![f32::INFINITY; trav.traversable.len()];
-    let mut parent = vec![u32::MAX; trav.traversable.len()];
-    let mut closed = vec![false; trav.traversable.len()];
+    // Neighbour offsets: four straight steps, then four diagonals with the two straight
+    // neighbours they brush past (no cutting corners).
+    let (e, n) = (1isize, w as isize);
+    let straight = [e, -e, n, -n];
+    let diagonal = [(e + n, e, n), (e - n, e, -n), (-e + n, -e, n), (-e - n, -e, -n)];
+
+    let mut cost = vec![f32::INFINITY; w * h];
+    let mut parent = vec![u32::MAX; w * h];
+    let mut closed = vec![false; w * h];
     let mut open = BinaryHeap::new();
     cost[s] = 0.0;
-    open.push(Open { f: heuristic(s), g: 0.0, k: s });
+    open.push(Open { f: heuristic(s), g: 0.0, k: s as u32 });
 
     while let Some(Open { g: g_k, k, .. }) = open.pop() {
+        let k = k as usize;
         if closed[k] {
             continue;
         }
@@ -54,38 +71,37 @@ pub fn plan_cells(
             return Some(walk_back(&parent, s, g, w));
         }
         closed[k] = true;
-        let (i, j) = ((k % w) as isize, (k / w) as isize);
-        let free = |di: isize, dj: isize| {
-            let (ni, nj) = (i + di, j + dj);
-            ni >= 0 && nj >= 0 && trav.is_traversable(ni as usize, nj as usize)
-        };
-        for (di, dj) in NEIGHBOURS {
-            // A diagonal step needs both orthogonal cells it brushes past.
-            if !free(di, dj) || (di != 0 && dj != 0 && !(free(di, 0) && free(0, dj))) {
-                continue;
+        let at = |d: isize| k.wrapping_add_signed(d);
+        let mut relax = |m: usize, step: f32, open: &mut BinaryHeap<Open>| {
+            let g_m = g_k + step;
+            if !closed[m] && g_m < cost[m] {
+                cost[m] = g_m;
+                parent[m] = k as u32;
+                open.push(Open { f: g_m + heuristic(m), g: g_m, k: m as u32 });
             }
-            let n = ((j + dj) as usize) * w + (i + di) as usize;
-            let step = if di != 0 && dj != 0 { SQRT_2 } else { 1.0 };
-            let g_n = g_k + step;
-            if !closed[n] && g_n < cost[n] {
-                cost[n] = g_n;
-                parent[n] = k as u32;
-                open.push(Open { f: g_n + heuristic(n), g: g_n, k: n });
+        };
+        for d in straight {
+            if open_cell[at(d)] {
+                relax(at(d), 1.0, &mut open);
+            }
+        }
+        for (d, a, b) in diagonal {
+            if open_cell[at(d)] && open_cell[at(a)] && open_cell[at(b)] {
+                relax(at(d), SQRT_2, &mut open);
             }
         }
     }
     None
 }
 
-const NEIGHBOURS: [(isize, isize); 8] =
-    [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)];
-
+/// Follows parents from the goal back to the start (padded indices) and unpads.
 fn walk_back(parent: &[u32], start: usize, goal: usize, w: usize) -> Vec<(usize, usize)> {
-    let mut path = vec![(goal % w, goal / w)];
+    let unpad = |k: usize| (k % w - 1, k / w - 1);
+    let mut path = vec![unpad(goal)];
     let mut k = goal;
     while k != start {
         k = parent[k] as usize;
-        path.push((k % w, k / w));
+        path.push(unpad(k));
     }
     path.reverse();
     path
@@ -96,7 +112,7 @@ fn walk_back(parent: &[u32], start: usize, goal: usize, w: usize) -> Vec<(usize,
 struct Open {
     f: f32,
     g: f32,
-    k: usize,
+    k: u32,
 }
 
 impl Ord for Open {

@@ -151,10 +151,8 @@ impl Fields<'_> {
     fn origin(&self) -> Result<Pose2, MapError> {
         const EXPECTED: &str = "a list [x, y, yaw] of three finite numbers (metres, metres, radians)";
         let v = self.require("origin", EXPECTED)?;
-        let xs: Option<Vec<f64>> = v
-            .as_sequence()
-            .map(|s| s.iter().map(|e| e.as_f64().filter(|x| x.is_finite())).collect())
-            .flatten();
+        let xs: Option<Vec<f64>> =
+            v.as_sequence().and_then(|s| s.iter().map(|e| e.as_f64().filter(|x| x.is_finite())).collect());
         match xs.as_deref() {
             Some(&[x, y, yaw]) => Ok(Pose2::new(x as f32, y as f32, yaw as f32)),
             _ => Err(self.invalid("origin", EXPECTED, v)),
