@@ -210,3 +210,19 @@ fn map_without_free_space_is_rejected() {
         other => panic!("expected NoFreeSpace, got {other:?}"),
     }
 }
+
+#[test]
+fn inspect_prints_the_yaml_geometry_of_a_real_map() {
+    let Some(dir) = shared_maps() else { return };
+    let v = apfn::cli::map::inspect(&dir.join("nav2_turtlebot3_world.yaml")).expect("inspect");
+    assert_eq!((v["width"].as_u64(), v["height"].as_u64()), (Some(384), Some(384)), "{v}");
+    let origin: Vec<f64> =
+        v["origin"].as_array().expect("origin list").iter().filter_map(|x| x.as_f64()).collect();
+    assert_eq!(origin, vec![-10.0, -10.0, 0.0], "{v}");
+    let sum: f64 = ["free_fraction", "occupied_fraction", "unknown_fraction"]
+        .iter()
+        .map(|k| v[*k].as_f64().expect("fraction"))
+        .sum();
+    assert!((sum - 1.0).abs() < 1e-9, "fractions sum to 1: {v}");
+    assert!(v["traversable_area_m2"].as_f64().expect("area") > 1.0, "{v}");
+}

@@ -1,6 +1,7 @@
 //! Layers derived from the fine occupancy grid: the filter's coarse network map, the traversable
 //! map (free space eroded by the robot radius) and the Euclidean distance field.
 
+use crate::world::map::edt::squared_edt;
 use crate::world::map::error::MapError;
 use crate::world::map::occupancy::{Cell, OccupancyMap};
 use crate::world::pose::{Pose2, wrap_angle};
@@ -211,77 +212,6 @@ impl DistanceField {
     /// Distance stored for the cell containing world point (x, y); [`Self::FAR_M`] off the map.
     pub fn distance_at(&self, map: &OccupancyMap, x: f32, y: f32) -> f32 {
         map.cell_at(x, y).map_or(Self::FAR_M, |(i, j)| self.distances_m[j * self.width + i])
-    }
-}
-
-/// Squared Euclidean distance, in cells², from every cell centre to the nearest cell for which
-/// `is_source(index)` holds; `f32::INFINITY` when there is none. Felzenszwalb & Huttenlocher's
-/// lower envelope of parabolas, along rows then along columns: O(cells), exact.
-fn squared_edt(w: usize, h: usize, is_source: impl Fn(usize) -> bool) -> Vec<f32> {
-    let mut grid: Vec<f32> = (0..w * h).map(|k| if is_source(k) { 0.0 } else { f32::INFINITY }).collect();
-    let mut scratch = Envelope::default();
-    let (mut f, mut d) = (vec![0.0f32; w.max(h)], vec![0.0f32; w.max(h)]);
-    for row in grid.chunks_exact_mut(w.max(1)) {
-        f[..w].copy_from_slice(row);
-        scratch.transform(&f[..w], &mut d[..w]);
-        row.copy_from_slice(&d[..w]);
-    }
-    for i in 0..w {
-        for j in 0..h {
-            f[j] = grid[j * w + i];
-        }
-        scratch.transform(&f[..h], &mut d[..h]);
-        for j in 0..h {
-            grid[j * w + i] = d[j];
-        }
-    }
-    grid
-}
-
-/// Reusable buffers of the 1D transform: parabola vertices and the left end of each one's reign.
-#[derive(Default)]
-struct Envelope {
-    vertex: Vec<usize>,
-    start: Vec<f64>,
-}
-
-impl Envelope {
-    /// `d[q] = min_p (q − p)² + f[p]` over the finite `f[p]`; infinite where none is finite.
-    fn transform(&mut self, f: &[f32], d: &mut [f32]) {
-        let (v, z) = (&mut self.vertex, &mut self.start);
-        v.clear();
-        z.clear();
-        let lifted = |p: usize| f64::from(f[p]) + (p * p) as f64;
-        for q in (0..f.len()).filter(|&q| f[q].is_finite()) {
-            loop {
-                let Some(&p) = v.last() else {
-                    v.push(q);
-                    z.push(f64::NEG_INFINITY);
-                    break;
-                };
-                let s = (lifted(q) - lifted(p)) / (2.0 * (q - p) as f64);
-                if z.last().is_some_and(|&zl| s <= zl) {
-                    v.pop();
-                    z.pop();
-                } else {
-                    v.push(q);
-                    z.push(s);
-                    break;
-                }
-            }
-        }
-        if v.is_empty() {
-            d.fill(f32::INFINITY);
-            return;
-        }
-        let mut k = 0;
-        for (q, out) in d.iter_mut().enumerate() {
-            while k + 1 < v.len() && z[k + 1] < q as f64 {
-                k += 1;
-            }
-            let p = v[k];
-            *out = ((q as f64 - p as f64).powi(2) + f64::from(f[p])) as f32;
-        }
     }
 }
 

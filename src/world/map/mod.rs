@@ -2,6 +2,7 @@
 //! (network map, traversable map, distance field) and an A* planner on the traversable map.
 
 mod astar;
+mod edt;
 mod error;
 mod layers;
 mod occupancy;
