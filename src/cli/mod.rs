@@ -1,1 +1,2 @@
 //! The `apfn` command line: one file per subcommand.
+pub mod map;

@@ -1,9 +1,19 @@
 //! Maps: the fine occupancy grid, its ROS map_server I/O, procedural apartments, derived layers
 //! (network map, traversable map, distance field) and an A* planner on the traversable map.
 
+mod astar;
+mod edt;
+mod error;
 mod layers;
 mod occupancy;
 pub mod procedural;
+mod ros_io;
 
+pub use astar::{plan_cells, plan_path};
+pub use error::MapError;
 pub use layers::{DistanceField, NetworkMap, TraversableMap};
 pub use occupancy::{Cell, OccupancyMap};
+pub use ros_io::{
+    MapMode, RosMapYaml, classify_pixel, load_ros_map, occupancy_from_image, read_ros_yaml, save_ros_map,
+    write_atomically,
+};

@@ -1,0 +1,176 @@
+//! `apfn map …`: inspect a ROS map, render a map to PNG, export procedural apartments as ROS maps.
+
+use crate::world::RobotParams;
+use crate::world::map::{Cell, OccupancyMap, TraversableMap, load_ros_map, save_ros_map, write_atomically};
+use anyhow::{Context, bail};
+use image::{ImageFormat, Rgb, RgbImage};
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+/// Map tools: look at, draw and export occupancy maps.
+#[derive(clap::Subcommand, Clone, Debug, PartialEq)]
+pub enum MapCommand {
+    /// Print one JSON object describing a ROS map: size in cells, resolution (m/cell), origin
+    /// [x, y, yaw], free/occupied/unknown fractions and the area (m²) a default robot can reach.
+    Inspect {
+        /// The map's YAML file (ROS map_server format).
+        path: PathBuf,
+    },
+    /// Draw a map as a PNG, one pixel per cell, north up: free white, occupied black, unknown
+    /// grey, space a default robot can reach tinted light blue.
+    Render {
+        /// A ROS map YAML to draw (or use --procedural).
+        path: Option<PathBuf>,
+        /// Draw the procedural apartment with this seed instead of a file.
+        #[arg(long)]
+        procedural: Option<u64>,
+        /// The PNG file to write.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Write the procedural apartment with this seed as a ROS map:
+    /// `<out>/apartment_<seed>.yaml` and `.pgm`.
+    Export {
+        /// Seed of the procedural apartment.
+        #[arg(long)]
+        procedural: u64,
+        /// Folder to write into (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+/// Runs one `apfn map` subcommand.
+pub fn run(cmd: MapCommand) -> anyhow::Result<()> {
+    match cmd {
+        MapCommand::Inspect { path } => {
+            println!("{}", inspect(&path)?);
+        }
+        MapCommand::Render { path, procedural, out } => {
+            let map = match (path, procedural) {
+                (Some(path), None) => load_ros_map(&path)?,
+                (None, Some(seed)) => procedural_map(seed)?,
+                _ => bail!("render needs exactly one of a map YAML path or --procedural <seed>"),
+            };
+            let trav = TraversableMap::build(&map, RobotParams::default().radius_m)
+                .inspect_err(|e| eprintln!("warning: drawing without traversable tint: {e}"))
+                .ok();
+            let mut png = Vec::new();
+            render(&map, trav.as_ref())
+                .write_to(&mut Cursor::new(&mut png), ImageFormat::Png)
+                .context("encoding the PNG")?;
+            write_atomically(&out, &png)?;
+        }
+        MapCommand::Export { procedural, out } => {
+            let map = procedural_map(procedural)?;
+            std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+            save_ros_map(&map, &out.join(format!("apartment_{procedural}.yaml")))?;
+        }
+    }
+    Ok(())
+}
+
+/// The summary `inspect` prints.
+pub fn inspect(path: &Path) -> anyhow::Result<serde_json::Value> {
+    let map = load_ros_map(path)?;
+    let (free, occupied, unknown) = map.counts();
+    let n = map.cells.len().max(1) as f64;
+    let trav = TraversableMap::build(&map, RobotParams::default().radius_m);
+    let area = trav.map_or(0.0, |t| t.area_m2(map.resolution_m));
+    let o = map.origin;
+    Ok(serde_json::json!({
+        "width": map.width,
+        "height": map.height,
+        "resolution": map.resolution_m,
+        "origin": [o.x, o.y, o.yaw],
+        "free_fraction": free as f64 / n,
+        "occupied_fraction": occupied as f64 / n,
+        "unknown_fraction": unknown as f64 / n,
+        "traversable_area_m2": area,
+    }))
+}
+
+/// One pixel per cell, image row 0 = the map's top row.
+pub fn render(map: &OccupancyMap, trav: Option<&TraversableMap>) -> RgbImage {
+    let reachable = |i: usize, j: usize| trav.is_some_and(|t| t.is_traversable(i, j));
+    RgbImage::from_fn(map.width as u32, map.height as u32, |x, row| {
+        let (i, j) = (x as usize, map.height - 1 - row as usize);
+        match map.get(i, j) {
+            Cell::Free if reachable(i, j) => Rgb([214, 232, 255]),
+            Cell::Free => Rgb([255, 255, 255]),
+            Cell::Occupied => Rgb([0, 0, 0]),
+            Cell::Unknown => Rgb([150, 150, 150]),
+        }
+    })
+}
+
+/// The procedural apartment for `seed`.
+// Lead: once `world::map::procedural` is merged, the body becomes
+// `Ok(crate::world::map::procedural::generate_apartment(seed, &ApartmentParams::default()))`.
+fn procedural_map(seed: u64) -> anyhow::Result<OccupancyMap> {
+    bail!("procedural maps not available yet (seed {seed}): world::map::procedural is not merged")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::tiny_room;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(subcommand)]
+        cmd: MapCommand,
+    }
+
+    #[test]
+    fn subcommands_parse() {
+        let cli =
+            Cli::try_parse_from(["apfn", "render", "--procedural", "3", "--out", "a.png"]).expect("parses");
+        assert_eq!(cli.cmd, MapCommand::Render { path: None, procedural: Some(3), out: "a.png".into() });
+        let cli = Cli::try_parse_from(["apfn", "export", "--procedural", "9", "--out", "d"]).expect("parses");
+        assert_eq!(cli.cmd, MapCommand::Export { procedural: 9, out: "d".into() });
+        assert!(Cli::try_parse_from(["apfn", "export", "--out", "d"]).is_err(), "export needs a seed");
+    }
+
+    #[test]
+    fn inspect_reports_geometry_and_fractions() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let yaml = dir.path().join("room.yaml");
+        save_ros_map(&tiny_room(), &yaml).expect("save");
+        let v = inspect(&yaml).expect("inspect");
+        assert_eq!((v["width"].as_u64(), v["height"].as_u64()), (Some(20), Some(15)), "{v}");
+        assert!((v["resolution"].as_f64().unwrap_or(0.0) - 0.1).abs() < 1e-6, "{v}");
+        let (f, o, u) = tiny_room().counts();
+        let total = (f + o + u) as f64;
+        assert!((v["free_fraction"].as_f64().unwrap_or(-1.0) - f as f64 / total).abs() < 1e-9, "{v}");
+        assert!((v["occupied_fraction"].as_f64().unwrap_or(-1.0) - o as f64 / total).abs() < 1e-9, "{v}");
+        assert_eq!(v["unknown_fraction"].as_f64(), Some(0.0), "{v}");
+        let area = v["traversable_area_m2"].as_f64().unwrap_or(0.0);
+        assert!(area > 0.1 && area < f as f64 * 0.01, "traversable area {area} m² below free area");
+    }
+
+    #[test]
+    fn render_writes_a_north_up_png() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let mut map = tiny_room();
+        map.set(1, 13, Cell::Unknown); // top-left inside corner
+        let yaml = dir.path().join("room.yaml");
+        save_ros_map(&map, &yaml).expect("save");
+        let out = dir.path().join("room.png");
+        run(MapCommand::Render { path: Some(yaml), procedural: None, out: out.clone() }).expect("render");
+        let img = image::open(&out).expect("a readable PNG").to_rgb8();
+        assert_eq!(img.dimensions(), (20, 15), "one pixel per cell");
+        assert_eq!(img.get_pixel(0, 0), &Rgb([0, 0, 0]), "wall corner is black");
+        assert_eq!(img.get_pixel(1, 1), &Rgb([150, 150, 150]), "row 0 is the map's top: unknown at (1, 13)");
+        assert_eq!(img.get_pixel(1, 7), &Rgb([255, 255, 255]), "free next to a wall is not reachable");
+        assert_eq!(img.get_pixel(6, 7), &Rgb([214, 232, 255]), "open floor is tinted reachable");
+    }
+
+    #[test]
+    fn render_needs_exactly_one_source() {
+        let out = PathBuf::from("unused.png");
+        let err = run(MapCommand::Render { path: None, procedural: None, out }).expect_err("no source");
+        assert!(err.to_string().contains("exactly one"), "{err}");
+    }
+}
