@@ -2,6 +2,7 @@
 
 use crate::world::RobotParams;
 use crate::world::map::{Cell, OccupancyMap, TraversableMap, load_ros_map, save_ros_map, write_atomically};
+use crate::world::map::procedural::{ApartmentParams, generate_apartment};
 use anyhow::{Context, bail};
 use image::{ImageFormat, Rgb, RgbImage};
 use std::io::Cursor;
@@ -49,7 +50,7 @@ pub fn run(cmd: MapCommand) -> anyhow::Result<()> {
         MapCommand::Render { path, procedural, out } => {
             let map = match (path, procedural) {
                 (Some(path), None) => load_ros_map(&path)?,
-                (None, Some(seed)) => procedural_map(seed)?,
+                (None, Some(seed)) => generate_apartment(seed, &ApartmentParams::default()),
                 _ => bail!("render needs exactly one of a map YAML path or --procedural <seed>"),
             };
             let trav = TraversableMap::build(&map, RobotParams::default().radius_m)
@@ -62,7 +63,7 @@ pub fn run(cmd: MapCommand) -> anyhow::Result<()> {
             write_atomically(&out, &png)?;
         }
         MapCommand::Export { procedural, out } => {
-            let map = procedural_map(procedural)?;
+            let map = generate_apartment(procedural, &ApartmentParams::default());
             std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
             save_ros_map(&map, &out.join(format!("apartment_{procedural}.yaml")))?;
         }
@@ -102,13 +103,6 @@ pub fn render(map: &OccupancyMap, trav: Option<&TraversableMap>) -> RgbImage {
             Cell::Unknown => Rgb([150, 150, 150]),
         }
     })
-}
-
-/// The procedural apartment for `seed`.
-// Lead: once `world::map::procedural` is merged, the body becomes
-// `Ok(crate::world::map::procedural::generate_apartment(seed, &ApartmentParams::default()))`.
-fn procedural_map(seed: u64) -> anyhow::Result<OccupancyMap> {
-    bail!("procedural maps not available yet (seed {seed}): world::map::procedural is not merged")
 }
 
 #[cfg(test)]

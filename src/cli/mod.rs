@@ -1,2 +1,45 @@
-//! The `apfn` command line: one file per subcommand.
+//! The `apfn` command line: one file per subcommand; `main.rs` only parses and dispatches.
+
 pub mod map;
+pub mod run;
+pub mod systems;
+
+use clap::{Parser, Subcommand};
+
+/// apfn: active robot localization — simulate, localize and evaluate on 2D maps.
+#[derive(Parser, Debug)]
+#[command(name = "apfn", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Inspect, render and export maps.
+    #[command(subcommand)]
+    Map(map::MapCommand),
+    /// Run a scene headless with a schedule of systems and record the trajectories.
+    Run(run::RunArgs),
+    /// List the registered systems with their parameters.
+    #[command(subcommand)]
+    Systems(systems::SystemsCommand),
+}
+
+/// Runs the parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Map(cmd) => map::run(cmd),
+        Command::Run(args) => run::run(args),
+        Command::Systems(cmd) => systems::run(cmd),
+    }
+}
+
+/// Sizes rayon's global pool; results never depend on it, only speed does.
+pub fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
+    if let Some(n) = threads {
+        anyhow::ensure!(n > 0, "--threads: expected at least 1 thread");
+        rayon::ThreadPoolBuilder::new().num_threads(n).build_global()?;
+    }
+    Ok(())
+}

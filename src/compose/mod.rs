@@ -1,1 +1,16 @@
-//! Composition: the system registry, schedule files (systems/*.ron) and scene files (scenes/*.ron).
+//! Composition: the system registry, schedule files (`systems/*.ron`) and scene files
+//! (`scenes/*.ron`), all validated into typed values before an `App` exists; then spawning.
+
+mod catalog;
+mod error;
+mod registry;
+mod scene;
+mod schedule;
+mod spawn;
+
+pub use catalog::standard_registry;
+pub use error::ComposeError;
+pub use registry::{ConfiguredSystem, NoParams, RegisteredSystem, Registry, StepSlot, SystemSpec};
+pub use scene::{LoadedScene, MapSource, NamedMap, Scene};
+pub use schedule::{Pipeline, PipelineStep};
+pub use spawn::{MapName, NETWORK_RESOLUTION_M, spawn_scene};

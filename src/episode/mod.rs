@@ -1,1 +1,11 @@
-//! Episode bookkeeping: resets, per-step errors and metrics.
+//! Episode bookkeeping: fixed-length episodes with random restarts, per-step errors and the
+//! paper's summary metrics.
+
+mod metrics;
+mod reset;
+
+pub use metrics::{
+    CellMetrics, CompletedEpisodes, EpisodeLog, EpisodeRecord, LOSS_BETA, SUCCESS_RADIUS_M, StepError,
+    step_metrics, succeeded, summarize,
+};
+pub use reset::{Episode, EpisodeParams, EpisodeStart, episode_reset};

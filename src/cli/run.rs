@@ -1,0 +1,192 @@
+//! `apfn run`: runs a scene headless under a schedule, records every robot's trajectory and
+//! reports the simulation speed.
+
+use crate::act::Collided;
+use crate::agent::Action;
+use crate::cli::set_threads;
+use crate::compose::{LoadedScene, MapName, Pipeline, Scene, standard_registry};
+use crate::episode::Episode;
+use crate::particles::PoseEstimate;
+use crate::plugin::headless_app;
+use crate::world::map::write_atomically;
+use crate::world::{OnMap, TruePose};
+use anyhow::Context;
+use bevy::prelude::*;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// The scene `apfn run` uses when none is given: procedural apartments (no files needed).
+pub const DEFAULT_SCENE: (&str, &str) = ("scenes/apartment.ron", include_str!("../../scenes/apartment.ron"));
+
+/// The schedule used when neither the command line nor the scene names one.
+pub const DEFAULT_SYSTEMS: (&str, &str) = ("systems/random.ron", include_str!("../../systems/random.ron"));
+
+#[derive(clap::Args, Clone, Debug, PartialEq)]
+pub struct RunArgs {
+    /// Scene file (scenes/*.ron). Default: the embedded procedural-apartment scene.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Schedule file (systems/*.ron). Default: the scene's `systems`, else the embedded random-policy schedule.
+    #[arg(long)]
+    pub systems: Option<PathBuf>,
+    /// Agent steps to simulate (each robot moves once per step).
+    #[arg(long, default_value_t = 200)]
+    pub steps: u64,
+    /// Folder for trajectories.jsonl and run.json (created if missing).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Worker threads (default: all cores); results do not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// One robot at one step, as written to trajectories.jsonl.
+#[derive(Serialize, Debug, Clone, PartialEq)]
+pub struct TrajectoryRow {
+    pub step: u64,
+    pub robot: usize,
+    pub map: String,
+    pub episode: u32,
+    pub episode_step: u32,
+    /// True pose [x m, y m, yaw rad] after the step's motion.
+    pub pose: [f32; 3],
+    /// The filter's estimate used for this step's action, when a filter runs.
+    pub estimate: Option<[f32; 3]>,
+    /// Normalised action [linear, angular] in [−1, 1].
+    pub action: [f32; 2],
+    pub collided: bool,
+}
+
+/// What run.json holds: the inputs and the measured speed.
+#[derive(Serialize, Debug)]
+pub struct RunSummary {
+    pub scene: String,
+    pub systems: String,
+    pub systems_in_order: Vec<&'static str>,
+    pub maps: usize,
+    pub robots: usize,
+    pub steps: u64,
+    pub threads: usize,
+    pub seconds: f64,
+    pub steps_per_s: f64,
+    pub robot_steps_per_s: f64,
+}
+
+pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    set_threads(args.threads)?;
+    let loaded = load_scene(args.scene.as_deref())?;
+    let pipeline = load_pipeline(args.systems.as_deref(), &loaded)?;
+    let systems_label = pipeline.source.display().to_string();
+    let systems_in_order = pipeline.names();
+    let (mut app, robots) = headless_app(&loaded, pipeline)?;
+
+    let bar = ProgressBar::new(args.steps).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {per_sec}, eta {eta}")
+            .expect("static progress template"),
+    );
+    let mut rows = Vec::new();
+    let mut simulated = Duration::ZERO;
+    for step in 0..args.steps {
+        let started = Instant::now();
+        app.update();
+        simulated += started.elapsed();
+        rows.extend(snapshot(app.world_mut(), &robots, step));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+
+    let seconds = simulated.as_secs_f64();
+    let summary = RunSummary {
+        scene: loaded.path.display().to_string(),
+        systems: systems_label,
+        systems_in_order,
+        maps: loaded.maps.len(),
+        robots: robots.len(),
+        steps: args.steps,
+        threads: rayon::current_num_threads(),
+        seconds,
+        steps_per_s: args.steps as f64 / seconds,
+        robot_steps_per_s: (args.steps as usize * robots.len()) as f64 / seconds,
+    };
+    println!(
+        "{} steps × {} robots on {} maps in {:.2} s: {:.1} steps/s, {:.0} robot-steps/s ({} threads)",
+        summary.steps,
+        summary.robots,
+        summary.maps,
+        seconds,
+        summary.steps_per_s,
+        summary.robot_steps_per_s,
+        summary.threads
+    );
+    if let Some(out) = &args.out {
+        write_outputs(out, &rows, &summary)?;
+        println!("wrote {}/trajectories.jsonl and run.json", out.display());
+    }
+    Ok(())
+}
+
+/// The scene from `path`, or the embedded default.
+pub fn load_scene(path: Option<&Path>) -> anyhow::Result<LoadedScene> {
+    Ok(match path {
+        Some(path) => Scene::load(path)?,
+        None => {
+            let (label, text) = DEFAULT_SCENE;
+            let scene: Scene = ron::Options::default()
+                .from_str(text)
+                .with_context(|| format!("embedded default scene {label}"))?;
+            scene.into_loaded(Path::new(label))?
+        }
+    })
+}
+
+/// The schedule from `path`, else the scene's own (relative to the scene file), else the default.
+pub fn load_pipeline(path: Option<&Path>, scene: &LoadedScene) -> anyhow::Result<Pipeline> {
+    let registry = standard_registry();
+    let scene_dir = scene.path.parent().unwrap_or(Path::new("."));
+    Ok(match (path, &scene.scene.systems) {
+        (Some(path), _) => Pipeline::load(path, &registry)?,
+        (None, Some(relative)) => Pipeline::load(&scene_dir.join(relative), &registry)?,
+        (None, None) => Pipeline::parse(DEFAULT_SYSTEMS.1, Path::new(DEFAULT_SYSTEMS.0), &registry)?,
+    })
+}
+
+/// Every robot's row for this step.
+fn snapshot(world: &mut World, robots: &[Entity], step: u64) -> Vec<TrajectoryRow> {
+    robots
+        .iter()
+        .enumerate()
+        .filter_map(|(index, &robot)| {
+            let entity = world.get_entity(robot).ok()?;
+            let pose = entity.get::<TruePose>()?.0;
+            let map = entity.get::<OnMap>().and_then(|m| world.get::<MapName>(m.0)).map(|n| n.0.clone());
+            let episode = entity.get::<Episode>().copied().unwrap_or_default();
+            let action = entity.get::<Action>().copied().unwrap_or_default();
+            Some(TrajectoryRow {
+                step,
+                robot: index,
+                map: map.unwrap_or_default(),
+                episode: episode.index,
+                episode_step: episode.step,
+                pose: [pose.x, pose.y, pose.yaw],
+                estimate: entity.get::<PoseEstimate>().map(|e| [e.pose.x, e.pose.y, e.pose.yaw]),
+                action: [action.linear, action.angular],
+                collided: entity.get::<Collided>().is_some_and(|c| c.0),
+            })
+        })
+        .collect()
+}
+
+/// Writes both files atomically: an interrupted run never leaves half a file.
+fn write_outputs(out: &Path, rows: &[TrajectoryRow], summary: &RunSummary) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut lines = String::new();
+    for row in rows {
+        lines += &serde_json::to_string(row)?;
+        lines.push('\n');
+    }
+    write_atomically(&out.join("trajectories.jsonl"), lines.as_bytes())?;
+    write_atomically(&out.join("run.json"), serde_json::to_string_pretty(summary)?.as_bytes())?;
+    Ok(())
+}

@@ -1,0 +1,49 @@
+//! `apfn systems list`: every registered system, its stage, what it reads and writes, and its
+//! parameters with their defaults (as RON, ready to paste into a schedule file).
+
+use crate::compose::standard_registry;
+
+#[derive(clap::Subcommand, Clone, Debug, PartialEq, Eq)]
+pub enum SystemsCommand {
+    /// Print each system's name, stage, reads/writes, needs/produces and default parameters.
+    List,
+}
+
+pub fn run(cmd: SystemsCommand) -> anyhow::Result<()> {
+    match cmd {
+        SystemsCommand::List => print!("{}", listing()),
+    }
+    Ok(())
+}
+
+/// The listing `apfn systems list` prints.
+pub fn listing() -> String {
+    let registry = standard_registry();
+    let mut out = String::new();
+    for entry in registry.entries() {
+        out += &format!("{} [{:?}]\n  {}\n", entry.name, entry.stage, entry.summary);
+        if !entry.needs.is_empty() {
+            out += &format!("  needs: {}\n", entry.needs.join(", "));
+        }
+        if !entry.produces.is_empty() {
+            out += &format!("  produces: {}\n", entry.produces.join(", "));
+        }
+        let params = entry.with_defaults().params_ron();
+        out += &format!("  params: {}\n\n", params.replace('\n', "\n  "));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn listing_names_every_system_with_its_defaults() {
+        let text = listing();
+        for name in standard_registry().names() {
+            assert!(text.contains(&format!("{name} [")), "listing misses `{name}`");
+        }
+        assert!(text.contains("alpha: 0.5"), "resample's paper default α = 0.5 must be listed");
+    }
+}

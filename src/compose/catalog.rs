@@ -1,0 +1,81 @@
+//! The standard registry: every system apfn ships, in dataflow order. A new system (a learned
+//! likelihood, a belief projection, an agent) joins by adding one `register` call here.
+
+use crate::act::{drive, physics};
+use crate::agent::random_policy;
+use crate::compose::registry::{NoParams, Registry, SystemSpec};
+use crate::episode::episode_reset;
+use crate::particles::{
+    InitParams, LikelihoodFieldParams, ResampleParams, TransitionParams, estimate, init_particles,
+    mcl_likelihood_field, resample, transition,
+};
+use crate::plugin::ApfnSet::{self, *};
+use crate::sense::{DepthParams, LidarParams, LocalGridParams, OdometryParams, depth, lidar, local_grid, odometry};
+
+fn spec(
+    name: &'static str,
+    stage: ApfnSet,
+    summary: &'static str,
+    needs: &'static [&'static str],
+    produces: &'static [&'static str],
+) -> SystemSpec {
+    SystemSpec { name, stage, summary, needs, produces }
+}
+
+/// All systems apfn ships.
+pub fn standard_registry() -> Registry {
+    let mut r = Registry::default();
+    r.register::<NoParams, _, _>(
+        spec("episode_reset", Episode, "Reads EpisodeParams, maps. Writes Episode, TruePose, physics, EpisodeStart.", &[], &["EpisodeStart"]),
+        episode_reset,
+    )
+    .register::<OdometryParams, _, _>(
+        spec("odometry", Sense, "Reads TruePose, PreviousPose. Writes Odometry (noisy), PreviousPose.", &[], &["Odometry"]),
+        odometry,
+    )
+    .register::<LidarParams, _, _>(
+        spec("lidar", Sense, "Reads TruePose, the map's RayGrid. Writes LidarScan.", &[], &["LidarScan"]),
+        lidar,
+    )
+    .register::<LocalGridParams, _, _>(
+        spec("local_grid", Sense, "Reads LidarScan. Writes LocalGrid (0 occupied, 0.5 unknown, 1 free).", &["LidarScan"], &["LocalGrid"]),
+        local_grid,
+    )
+    .register::<DepthParams, _, _>(
+        spec("depth", Sense, "Reads TruePose, the map's RayGrid. Writes DepthStrip.", &[], &["DepthStrip"]),
+        depth,
+    )
+    .register::<InitParams, _, _>(
+        spec("init_particles", Particles, "Reads TruePose, EpisodeStart, the map's layers. Writes ParticleSet.", &[], &["ParticleSet"]),
+        init_particles,
+    )
+    .register::<TransitionParams, _, _>(
+        spec("transition", Particles, "Reads Odometry. Writes ParticleSet poses.", &["ParticleSet", "Odometry"], &[]),
+        transition,
+    )
+    .register::<LikelihoodFieldParams, _, _>(
+        spec("mcl_likelihood_field", Particles, "Reads LidarScan, the map's DistanceField. Writes ParticleSet weights.", &["ParticleSet", "LidarScan"], &[]),
+        mcl_likelihood_field,
+    )
+    .register::<ResampleParams, _, _>(
+        spec("resample", Particles, "Reads ParticleSet weights. Writes ParticleSet.", &["ParticleSet"], &[]),
+        resample,
+    )
+    .register::<NoParams, _, _>(
+        spec("estimate", Particles, "Reads ParticleSet. Writes PoseEstimate.", &["ParticleSet"], &["PoseEstimate"]),
+        estimate,
+    )
+    .register::<NoParams, _, _>(
+        spec("random_policy", Agent, "Reads EpisodeRng. Writes Action.", &[], &["Action"]),
+        random_policy,
+    )
+    .register::<NoParams, _, _>(
+        spec("drive", Act, "Reads Action, RobotParams. Writes DriveCommand.", &["Action"], &["DriveCommand"]),
+        drive,
+    )
+    .register::<NoParams, _, _>(
+        spec("physics", Act, "Reads DriveCommand, the scene's PhysicsParams. Writes TruePose, Collided, MapPhysics.", &["DriveCommand"], &["TruePose", "Collided"]),
+        physics,
+    );
+    r
+}

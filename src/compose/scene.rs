@@ -1,0 +1,138 @@
+//! Scene files (`scenes/*.ron`): the world to simulate — which maps, how many robots, the robot
+//! body, episode length, physics timing and the seed. What runs on it is a schedule file's job.
+//!
+//! ```ron
+//! Scene(maps: Procedural(split: seen, count: 2), robots_per_map: 4, seed: 7)
+//! ```
+
+use crate::act::PhysicsParams;
+use crate::compose::error::ComposeError;
+use crate::episode::EpisodeParams;
+use crate::world::map::procedural::{ApartmentParams, Split, generate_apartment};
+use crate::world::map::load_ros_map;
+use crate::world::{OccupancyMap, RobotParams};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// Which maps to load; each map gets its own physics world.
+    pub maps: MapSource,
+    /// Robots spawned on every map (batched through every system in one pass).
+    #[serde(default = "one")]
+    pub robots_per_map: usize,
+    /// Whether robots sharing a map are obstacles to each other's bodies.
+    #[serde(default)]
+    pub robots_collide: bool,
+    /// Root of every random stream of the run.
+    #[serde(default)]
+    pub seed: u64,
+    #[serde(default)]
+    pub episode: EpisodeParams,
+    #[serde(default)]
+    pub robot: RobotParams,
+    #[serde(default)]
+    pub physics: PhysicsParams,
+    /// Schedule to run when the command line names none, relative to this file.
+    #[serde(default)]
+    pub systems: Option<PathBuf>,
+}
+
+fn one() -> usize {
+    1
+}
+
+/// Where the maps come from.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub enum MapSource {
+    /// `count` procedural apartments from the `split`'s seed range, starting `first` seeds in.
+    Procedural {
+        split: Split,
+        #[serde(default)]
+        first: u64,
+        #[serde(default = "one")]
+        count: usize,
+        #[serde(default)]
+        params: ApartmentParams,
+    },
+    /// ROS map_server YAML files, relative to the scene file (as map_server resolves images).
+    Ros { paths: Vec<PathBuf> },
+}
+
+/// A map ready to spawn, with the name results are filed under.
+#[derive(Clone, Debug)]
+pub struct NamedMap {
+    pub name: String,
+    pub map: OccupancyMap,
+}
+
+/// A validated scene with its maps loaded.
+#[derive(Clone, Debug)]
+pub struct LoadedScene {
+    pub path: PathBuf,
+    pub scene: Scene,
+    pub maps: Vec<NamedMap>,
+}
+
+impl Scene {
+    /// Reads, validates and loads a scene file and its maps.
+    pub fn load(path: &Path) -> Result<LoadedScene, ComposeError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ComposeError::Read { path: path.to_owned(), source })?;
+        let scene: Scene = ron::Options::default().from_str(&text).map_err(|e| ComposeError::from_ron(path, e))?;
+        scene.into_loaded(path)
+    }
+
+    /// Validates an in-code scene and loads its maps; `path` labels errors and anchors relative paths.
+    pub fn into_loaded(self, path: &Path) -> Result<LoadedScene, ComposeError> {
+        let invalid = |field: &str, message: &str| ComposeError::Scene {
+            path: path.to_owned(),
+            field: field.to_owned(),
+            message: message.to_owned(),
+        };
+        if self.robots_per_map == 0 {
+            return Err(invalid("robots_per_map", "expected at least 1 robot per map"));
+        }
+        if self.episode.steps == 0 {
+            return Err(invalid("episode.steps", "expected at least 1 step per episode"));
+        }
+        if self.physics.substeps == 0 || !(self.physics.dt_s > 0.0) {
+            return Err(invalid("physics", "expected substeps ≥ 1 and dt_s > 0"));
+        }
+        if !(self.robot.radius_m > 0.0) {
+            return Err(invalid("robot.radius_m", "expected a positive radius in metres"));
+        }
+        let maps = match &self.maps {
+            MapSource::Procedural { count: 0, .. } | MapSource::Ros { paths: _ } if self.map_count() == 0 => {
+                return Err(invalid("maps", "expected at least one map"));
+            }
+            MapSource::Procedural { split, first, count, params } => (0..*count as u64)
+                .map(|k| {
+                    let seed = split.seeds().start + first + k;
+                    NamedMap { name: format!("apartment_{seed}"), map: generate_apartment(seed, params) }
+                })
+                .collect(),
+            MapSource::Ros { paths } => {
+                let base = path.parent().unwrap_or(Path::new("."));
+                paths
+                    .iter()
+                    .map(|p| {
+                        let map = load_ros_map(&base.join(p)).map_err(|e| invalid("maps", &e.to_string()))?;
+                        let name = p.file_stem().map_or_else(|| p.display().to_string(), |s| s.to_string_lossy().into());
+                        Ok(NamedMap { name, map })
+                    })
+                    .collect::<Result<_, ComposeError>>()?
+            }
+        };
+        Ok(LoadedScene { path: path.to_owned(), scene: self, maps })
+    }
+
+    fn map_count(&self) -> usize {
+        match &self.maps {
+            MapSource::Procedural { count, .. } => *count,
+            MapSource::Ros { paths } => paths.len(),
+        }
+    }
+}

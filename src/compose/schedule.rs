@@ -1,0 +1,201 @@
+//! Schedule files (`systems/*.ron`): an ordered list of `(name, params)` steps, decoded against
+//! the registry into a validated `Pipeline` before any `App` exists.
+//!
+//! ```ron
+//! Schedule(steps: [("odometry", (trans_noise_m: 0.01)), ("lidar", ()), ("random_policy", ())])
+//! ```
+
+use crate::compose::error::ComposeError;
+use crate::compose::registry::{ConfiguredSystem, Registry, StepSlot, chain_slots};
+use crate::plugin::ApfnSet;
+use bevy::prelude::*;
+use serde::de::{self, DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// One decoded step of a schedule.
+pub struct PipelineStep {
+    pub name: &'static str,
+    pub stage: ApfnSet,
+    pub system: Box<dyn ConfiguredSystem>,
+}
+
+/// A validated schedule: the systems of one agent step, in order.
+pub struct Pipeline {
+    pub source: PathBuf,
+    pub steps: Vec<PipelineStep>,
+}
+
+impl Pipeline {
+    /// Reads and validates a schedule file.
+    pub fn load(path: &Path, registry: &Registry) -> Result<Pipeline, ComposeError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ComposeError::Read { path: path.to_owned(), source })?;
+        Self::parse(&text, path, registry)
+    }
+
+    /// Decodes schedule text; `path` only labels errors.
+    pub fn parse(text: &str, path: &Path, registry: &Registry) -> Result<Pipeline, ComposeError> {
+        let mut de =
+            ron::Deserializer::from_str(text).map_err(|e| ComposeError::from_ron(path, e))?;
+        let steps = de
+            .deserialize_struct("Schedule", &["steps"], ScheduleVisitor { registry })
+            .and_then(|steps| de.end().map(|_| steps))
+            .map_err(|e| ComposeError::from_ron(path, de.span_error(e)))?;
+        let pipeline = Pipeline { source: path.to_owned(), steps };
+        pipeline.validate(registry)?;
+        Ok(pipeline)
+    }
+
+    /// Checks what parsing cannot: no step twice, stages in order, and every step's needs met
+    /// by an earlier step.
+    fn validate(&self, registry: &Registry) -> Result<(), ComposeError> {
+        let error = |index: usize, name: &str, message: String| ComposeError::Step {
+            path: self.source.clone(),
+            index: index + 1,
+            name: name.to_owned(),
+            message,
+        };
+        let mut produced: Vec<&str> = Vec::new();
+        for (index, step) in self.steps.iter().enumerate() {
+            if self.steps[..index].iter().any(|s| s.name == step.name) {
+                return Err(error(index, step.name, "appears twice; a system runs once per step".into()));
+            }
+            if let Some(later) = self.steps[..index].iter().find(|s| s.stage > step.stage) {
+                return Err(error(
+                    index,
+                    step.name,
+                    format!(
+                        "is a {:?} system but comes after `{}` ({:?}); stages run in the order {:?}",
+                        step.stage,
+                        later.name,
+                        later.stage,
+                        ApfnSet::ALL
+                    ),
+                ));
+            }
+            let entry = registry.get(step.name).expect("parsed steps are registered");
+            for need in entry.needs {
+                if !produced.contains(need) {
+                    let providers: Vec<_> =
+                        registry.entries().iter().filter(|e| e.produces.contains(need)).map(|e| e.name).collect();
+                    return Err(error(
+                        index,
+                        step.name,
+                        format!("needs {need}, which no earlier step produces; add one of {providers:?} before it"),
+                    ));
+                }
+            }
+            produced.extend(entry.produces);
+        }
+        Ok(())
+    }
+
+    /// Adds every step to `Update`, each in its stage and in file order.
+    pub fn install(&self, app: &mut App) {
+        for (index, step) in self.steps.iter().enumerate() {
+            step.system.install(app, StepSlot(index), step.stage);
+        }
+        chain_slots(app, Update, self.steps.len());
+    }
+
+    pub fn names(&self) -> Vec<&'static str> {
+        self.steps.iter().map(|s| s.name).collect()
+    }
+}
+
+struct ScheduleVisitor<'r> {
+    registry: &'r Registry,
+}
+
+impl<'de> Visitor<'de> for ScheduleVisitor<'_> {
+    type Value = Vec<PipelineStep>;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("Schedule(steps: [(\"system_name\", (params…)), …])")
+    }
+
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+        let mut steps = None;
+        while let Some(key) = map.next_key::<String>()? {
+            match key.as_str() {
+                "steps" if steps.is_none() => steps = Some(map.next_value_seed(StepsSeed(self.registry))?),
+                "steps" => return Err(de::Error::duplicate_field("steps")),
+                other => return Err(de::Error::unknown_field(other, &["steps"])),
+            }
+        }
+        steps.ok_or_else(|| de::Error::missing_field("steps"))
+    }
+}
+
+struct StepsSeed<'r>(&'r Registry);
+
+impl<'de> DeserializeSeed<'de> for StepsSeed<'_> {
+    type Value = Vec<PipelineStep>;
+
+    fn deserialize<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
+        deserializer.deserialize_seq(self)
+    }
+}
+
+impl<'de> Visitor<'de> for StepsSeed<'_> {
+    type Value = Vec<PipelineStep>;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("a list of (\"system_name\", (params…)) steps")
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
+        let mut steps = Vec::new();
+        while let Some(step) = seq.next_element_seed(StepSeed(self.0))? {
+            steps.push(step);
+        }
+        Ok(steps)
+    }
+}
+
+struct StepSeed<'r>(&'r Registry);
+
+impl<'de> DeserializeSeed<'de> for StepSeed<'_> {
+    type Value = PipelineStep;
+
+    fn deserialize<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
+        deserializer.deserialize_tuple(2, self)
+    }
+}
+
+impl<'de> Visitor<'de> for StepSeed<'_> {
+    type Value = PipelineStep;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("a step (\"system_name\", (params…))")
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
+        let name: String = seq.next_element()?.ok_or_else(|| de::Error::invalid_length(0, &self))?;
+        let Some(entry) = self.0.get(&name) else {
+            let hint = self.0.nearest(&name).map(|n| format!(" (did you mean `{n}`?)")).unwrap_or_default();
+            return Err(de::Error::custom(format!(
+                "unknown system `{name}`{hint}; known systems: {}",
+                self.0.names().join(", ")
+            )));
+        };
+        let system = seq
+            .next_element_seed(ParamsSeed(entry))?
+            .ok_or_else(|| de::Error::custom(format!("`{name}` needs its parameters: write `()` for defaults")))?;
+        Ok(PipelineStep { name: entry.name, stage: entry.stage, system })
+    }
+}
+
+struct ParamsSeed<'r>(&'r crate::compose::registry::RegisteredSystem);
+
+impl<'de> DeserializeSeed<'de> for ParamsSeed<'_> {
+    type Value = Box<dyn ConfiguredSystem>;
+
+    fn deserialize<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
+        let mut erased = <dyn erased_serde::Deserializer>::erase(deserializer);
+        self.0
+            .parse_params(&mut erased)
+            .map_err(|e| de::Error::custom(format!("parameters of `{}`: {e}", self.0.name)))
+    }
+}

@@ -1,0 +1,76 @@
+//! Turns a loaded scene into entities: one entity per map (grid, layers, ray grid, physics world)
+//! and `robots_per_map` robots on each, at random traversable start poses.
+
+use crate::act::{Collided, DriveCommand, MapPhysics};
+use crate::agent::Action;
+use crate::compose::error::ComposeError;
+use crate::compose::scene::{LoadedScene, NamedMap};
+use crate::episode::Episode;
+use crate::world::map::{DistanceField, NetworkMap, TraversableMap};
+use crate::world::rng::stream;
+use crate::world::{EpisodeRng, OnMap, Pose2, PreviousPose, Robot, TruePose};
+use crate::sense::{LidarScan, Odometry};
+use bevy::prelude::*;
+
+/// Names a map entity, as results and trajectories refer to it.
+#[derive(Component, Clone, Debug, PartialEq, Eq)]
+pub struct MapName(pub String);
+
+/// Filter map resolution, metres (reference: 0.1 m cells for PF-net).
+pub const NETWORK_RESOLUTION_M: f32 = 0.1;
+
+/// Start poses are redrawn this many times to keep robots apart when they collide.
+const START_POSE_TRIES: usize = 100;
+
+/// Inserts the scene's world resources and spawns its maps and robots; returns the robots in
+/// spawn order. Each robot's random stream is keyed by (seed, map index, robot index).
+pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity>, ComposeError> {
+    let scene = &loaded.scene;
+    world.insert_resource(scene.robot.clone());
+    world.insert_resource(scene.episode.clone());
+    world.insert_resource(scene.physics.clone());
+    let mut robots = Vec::new();
+    for (map_index, NamedMap { name, map }) in loaded.maps.iter().enumerate() {
+        let traversable = TraversableMap::build(map, scene.robot.radius_m).map_err(|e| ComposeError::Scene {
+            path: loaded.path.clone(),
+            field: "maps".into(),
+            message: format!("map `{name}`: {e}"),
+        })?;
+        let mut physics = MapPhysics::from_map(map, scene.physics.dt_s);
+        let mut starts: Vec<Pose2> = Vec::new();
+        let mut new_robots = Vec::new();
+        for robot_index in 0..scene.robots_per_map {
+            let mut rng = EpisodeRng(stream(&[scene.seed, map_index as u64, robot_index as u64]));
+            let min_gap = 2.0 * scene.robot.radius_m;
+            let start = (0..START_POSE_TRIES)
+                .map(|_| traversable.sample_pose(map, &mut rng.0))
+                .find(|p| !scene.robots_collide || starts.iter().all(|s| s.distance(p) > min_gap))
+                .unwrap_or_else(|| traversable.sample_pose(map, &mut rng.0));
+            starts.push(start);
+            let body = physics.add_robot(start, scene.robot.radius_m, scene.robots_collide);
+            new_robots.push((start, body, rng));
+        }
+        let map_entity = world
+            .spawn((
+                MapName(name.clone()),
+                NetworkMap::from_fine(map, NETWORK_RESOLUTION_M),
+                DistanceField::build(map),
+                crate::sense::RayGrid::from_map(map),
+                traversable,
+                physics,
+                map.clone(),
+            ))
+            .id();
+        for (start, body, rng) in new_robots {
+            let robot = world
+                .spawn((
+                    (Robot, TruePose(start), PreviousPose(start), OnMap(map_entity), body, rng),
+                    (Action::default(), DriveCommand::default(), Collided::default(), Episode::default()),
+                    (LidarScan::default(), Odometry::default()),
+                ))
+                .id();
+            robots.push(robot);
+        }
+    }
+    Ok(robots)
+}

@@ -1,0 +1,202 @@
+//! Localization error per step, collected per episode, and the paper's summary metrics.
+//!
+//! Definitions (DESIGN §5): per step, position error ‖(x̂, ŷ) − (x, y)‖, heading error |θ̂ − θ|
+//! wrapped to [0, π], and the PF-net loss L = Δx² + Δy² + 0.36·Δθ². Per table cell: the mean
+//! position error over all steps of all episodes (what the paper's tables call "RMSE"), the true
+//! RMSE, the mean |heading error|, final-step errors, and success = error < 1 m at every step of
+//! the last 25 % of the episode.
+
+use crate::act::Collided;
+use crate::episode::reset::{Episode, EpisodeParams};
+use crate::particles::PoseEstimate;
+use crate::world::{Pose2, TruePose, angle_error, wrap_angle};
+use bevy::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Weight of the squared heading error in the loss (paper: β = 0.36, metres and radians).
+pub const LOSS_BETA: f32 = 0.36;
+
+/// A position error below this, at every step of the last quarter, counts as success (metres).
+pub const SUCCESS_RADIUS_M: f32 = 1.0;
+
+/// The error of one estimate against the truth.
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StepError {
+    pub pos_err_m: f32,
+    pub orient_err_rad: f32,
+    /// L = Δx² + Δy² + β·Δθ²; the RL reward is −L (minus 0.1 on collision).
+    pub loss: f32,
+}
+
+impl StepError {
+    pub fn between(estimate: &Pose2, truth: &Pose2) -> Self {
+        let (dx, dy) = (estimate.x - truth.x, estimate.y - truth.y);
+        let dyaw = wrap_angle(estimate.yaw - truth.yaw);
+        Self {
+            pos_err_m: dx.hypot(dy),
+            orient_err_rad: angle_error(estimate.yaw, truth.yaw),
+            loss: dx * dx + dy * dy + LOSS_BETA * dyaw * dyaw,
+        }
+    }
+}
+
+/// The errors of the robot's current episode so far.
+#[derive(Component, Clone, Debug, Default, PartialEq)]
+pub struct EpisodeLog {
+    pub errors: Vec<StepError>,
+    /// Collisions seen at this episode's steps 2…T, i.e. caused by its first T − 1 actions
+    /// (the last action's outcome is only seen after the episode ends).
+    pub collisions: u32,
+}
+
+/// One finished episode, as the evaluation harness aggregates it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeRecord {
+    pub robot: Entity,
+    pub episode: u32,
+    pub errors: Vec<StepError>,
+    pub collisions: u32,
+}
+
+/// Episodes finished so far in this world, in completion order.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct CompletedEpisodes(pub Vec<EpisodeRecord>);
+
+/// Reads TruePose, PoseEstimate, Episode, EpisodeParams, Collided. Writes StepError, EpisodeLog,
+/// CompletedEpisodes (when an episode's last step is logged).
+pub fn step_metrics(
+    params: Res<EpisodeParams>,
+    mut completed: ResMut<CompletedEpisodes>,
+    mut robots: Query<(Entity, &TruePose, &PoseEstimate, &Episode, Option<&Collided>, &mut StepError, &mut EpisodeLog)>,
+) {
+    for (robot, truth, estimate, episode, collided, mut error, mut log) in &mut robots {
+        *error = StepError::between(&estimate.pose, &truth.0);
+        if episode.step == 1 {
+            log.errors.clear();
+            log.collisions = 0;
+        } else if collided.is_some_and(|c| c.0) {
+            log.collisions += 1;
+        }
+        log.errors.push(*error);
+        if episode.step == params.steps {
+            let errors = std::mem::take(&mut log.errors);
+            completed.0.push(EpisodeRecord { robot, episode: episode.index, errors, collisions: log.collisions });
+        }
+    }
+}
+
+/// The summary of many episodes: one cell of a results table.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CellMetrics {
+    pub episodes: usize,
+    /// Mean position error over all steps of all episodes (the paper's "RMSE" column), metres.
+    pub mean_pos_err_m: f32,
+    /// √(mean squared position error) over all steps, metres.
+    pub rmse_pos_m: f32,
+    pub final_pos_err_m: f32,
+    pub mean_orient_err_rad: f32,
+    pub final_orient_err_rad: f32,
+    /// Fraction of episodes with position error < 1 m at every step of the last 25 %.
+    pub success_rate: f32,
+    /// Mean collisions per episode.
+    pub collisions_per_episode: f32,
+}
+
+/// Aggregates finished episodes; `None` when there are none.
+pub fn summarize(records: &[EpisodeRecord]) -> Option<CellMetrics> {
+    let steps: Vec<&StepError> = records.iter().flat_map(|r| &r.errors).collect();
+    if steps.is_empty() {
+        return None;
+    }
+    let n = steps.len() as f64;
+    let mean = |f: &dyn Fn(&StepError) -> f32| steps.iter().map(|e| f(e) as f64).sum::<f64>() / n;
+    let finals: Vec<&StepError> = records.iter().filter_map(|r| r.errors.last()).collect();
+    let final_mean = |f: &dyn Fn(&StepError) -> f32| {
+        finals.iter().map(|e| f(e) as f64).sum::<f64>() / finals.len() as f64
+    };
+    let successes = records.iter().filter(|r| succeeded(&r.errors)).count();
+    Some(CellMetrics {
+        episodes: records.len(),
+        mean_pos_err_m: mean(&|e| e.pos_err_m) as f32,
+        rmse_pos_m: mean(&|e| e.pos_err_m * e.pos_err_m).sqrt() as f32,
+        final_pos_err_m: final_mean(&|e| e.pos_err_m) as f32,
+        mean_orient_err_rad: mean(&|e| e.orient_err_rad) as f32,
+        final_orient_err_rad: final_mean(&|e| e.orient_err_rad) as f32,
+        success_rate: successes as f32 / records.len() as f32,
+        collisions_per_episode: records.iter().map(|r| r.collisions as f32).sum::<f32>() / records.len() as f32,
+    })
+}
+
+/// Success: position error below 1 m at every step of the episode's last quarter.
+pub fn succeeded(errors: &[StepError]) -> bool {
+    let last_quarter = errors.len().div_ceil(4);
+    !errors.is_empty() && errors[errors.len() - last_quarter..].iter().all(|e| e.pos_err_m < SUCCESS_RADIUS_M)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bevy::ecs::system::RunSystemOnce;
+    use std::f32::consts::PI;
+
+    fn err(pos: f32) -> StepError {
+        StepError { pos_err_m: pos, orient_err_rad: 0.1, loss: pos * pos }
+    }
+
+    #[test]
+    fn step_error_wraps_heading_and_weights_it() {
+        let e = StepError::between(&Pose2::new(3.0, 4.0, PI - 0.05), &Pose2::new(0.0, 0.0, -PI + 0.05));
+        assert!((e.pos_err_m - 5.0).abs() < 1e-5);
+        assert!((e.orient_err_rad - 0.1).abs() < 1e-4, "across ±π the error is 0.1 rad, got {}", e.orient_err_rad);
+        assert!((e.loss - (25.0 + LOSS_BETA * 0.01)).abs() < 1e-3);
+    }
+
+    #[test]
+    fn summarize_separates_mean_error_from_rmse() {
+        let records = vec![
+            EpisodeRecord { robot: Entity::PLACEHOLDER, episode: 0, errors: vec![err(0.0), err(2.0)], collisions: 1 },
+            EpisodeRecord { robot: Entity::PLACEHOLDER, episode: 1, errors: vec![err(0.0), err(0.0)], collisions: 0 },
+        ];
+        let m = summarize(&records).unwrap();
+        assert!((m.mean_pos_err_m - 0.5).abs() < 1e-6, "mean of 0, 2, 0, 0");
+        assert!((m.rmse_pos_m - 1.0).abs() < 1e-6, "√(4/4)");
+        assert!((m.final_pos_err_m - 1.0).abs() < 1e-6, "finals 2 and 0");
+        assert_eq!(m.success_rate, 0.5, "the first episode ends 2 m off");
+        assert_eq!(m.collisions_per_episode, 0.5);
+        assert!(summarize(&[]).is_none());
+    }
+
+    #[test]
+    fn success_needs_the_whole_last_quarter_within_one_metre() {
+        let mut errors = vec![err(5.0); 6];
+        errors.extend([err(0.5), err(0.2)]);
+        assert!(succeeded(&errors), "early errors do not matter");
+        errors[6] = err(1.5);
+        assert!(!succeeded(&errors), "one miss in the last quarter fails");
+    }
+
+    #[test]
+    fn step_metrics_logs_and_completes_episodes() {
+        let mut world = World::new();
+        world.insert_resource(EpisodeParams { steps: 2 });
+        world.init_resource::<CompletedEpisodes>();
+        let truth = Pose2::new(1.0, 1.0, 0.0);
+        let robot = world
+            .spawn((
+                TruePose(truth),
+                PoseEstimate { pose: Pose2::new(1.3, 1.4, 0.0), ..default() },
+                Episode { index: 0, step: 1 },
+                StepError::default(),
+                EpisodeLog::default(),
+            ))
+            .id();
+        world.run_system_once(step_metrics).unwrap();
+        assert!((world.get::<StepError>(robot).unwrap().pos_err_m - 0.5).abs() < 1e-5);
+        assert!(world.resource::<CompletedEpisodes>().0.is_empty(), "episode not over after step 1");
+        world.get_mut::<Episode>(robot).unwrap().step = 2;
+        world.run_system_once(step_metrics).unwrap();
+        let done = &world.resource::<CompletedEpisodes>().0;
+        assert_eq!(done.len(), 1, "the last step completes the episode");
+        assert_eq!(done[0].errors.len(), 2);
+    }
+}
