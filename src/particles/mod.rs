@@ -1,1 +1,13 @@
-//! ② Particles: the particle set and the filter steps (init, transition, likelihood, resampling, estimate).
+//! ② Particles: the particle set and the filter steps, in the order a step runs them:
+//! init (fills empty sets) → transition → likelihood_field → resample → estimate. Each step is a
+//! plain kernel over a `ParticleSet` plus a small system; weights are log-weights, Σ exp = 1.
+
+mod estimate;
+mod resample;
+mod set;
+mod transition;
+
+pub use estimate::{PoseEstimate, estimate, estimate_pose};
+pub use resample::{ResampleParams, resample, resample_soft, should_resample, systematic_indices};
+pub use set::{Degenerate, FilterHealth, Guard, ParticleError, ParticleSet};
+pub use transition::{TRANSITION_CHUNK, TransitionParams, propagate, transition};
