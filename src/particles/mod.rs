@@ -3,11 +3,16 @@
 //! plain kernel over a `ParticleSet` plus a small system; weights are log-weights, Σ exp = 1.
 
 mod estimate;
+mod likelihood_field;
 mod resample;
 mod set;
 mod transition;
 
 pub use estimate::{PoseEstimate, estimate, estimate_pose};
+pub use likelihood_field::{
+    LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,
+    mcl_likelihood_field, weigh_likelihood_field,
+};
 pub use resample::{ResampleParams, resample, resample_soft, should_resample, systematic_indices};
 pub use set::{Degenerate, FilterHealth, Guard, ParticleError, ParticleSet};
 pub use transition::{TRANSITION_CHUNK, TransitionParams, propagate, transition};
