@@ -2,7 +2,7 @@
 //! covariance of (x, y, yaw) with heading deviations wrapped.
 
 use crate::particles::set::ParticleSet;
-use crate::world::{circular_mean, wrap_angle, Pose2};
+use crate::world::{Pose2, circular_mean, wrap_angle};
 use bevy::prelude::*;
 
 /// The filter's point estimate and its spread. `cov` rows/columns are (x m, y m, yaw rad).
@@ -20,11 +20,10 @@ pub fn estimate_pose(set: &ParticleSet) -> Option<PoseEstimate> {
     }
     let w = set.weights();
     let (mut mx, mut my, mut total) = (0.0f64, 0.0f64, 0.0f64);
-    for k in 0..set.len() {
-        let wk = w[k] as f64;
-        mx += wk * set.x[k] as f64;
-        my += wk * set.y[k] as f64;
-        total += wk;
+    for ((&wk, &x), &y) in w.iter().zip(&set.x).zip(&set.y) {
+        mx += wk as f64 * x as f64;
+        my += wk as f64 * y as f64;
+        total += wk as f64;
     }
     if total <= 0.0 || !total.is_finite() {
         return None;
@@ -32,11 +31,11 @@ pub fn estimate_pose(set: &ParticleSet) -> Option<PoseEstimate> {
     let (mx, my) = (mx / total, my / total);
     let yaw = circular_mean(&set.yaw, &w);
     let mut cov = [[0.0f64; 3]; 3];
-    for k in 0..set.len() {
-        let d = [set.x[k] as f64 - mx, set.y[k] as f64 - my, wrap_angle(set.yaw[k] - yaw) as f64];
+    for (((&wk, &x), &y), &a) in w.iter().zip(&set.x).zip(&set.y).zip(&set.yaw) {
+        let d = [x as f64 - mx, y as f64 - my, wrap_angle(a - yaw) as f64];
         for (r, row) in cov.iter_mut().enumerate() {
             for (c, v) in row.iter_mut().enumerate() {
-                *v += w[k] as f64 * d[r] * d[c];
+                *v += wk as f64 * d[r] * d[c];
             }
         }
     }

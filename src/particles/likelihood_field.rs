@@ -125,9 +125,10 @@ pub fn add_log_likelihoods(
             for &(bx, by) in &beams {
                 let gx = gx0 + c * bx - s * by;
                 let gy = gy0 + s * bx + c * by;
+                // `as i32` (not `as usize`): f32→u64 is a slow multi-instruction sequence on x86-64.
                 sum += if gx >= 0.0 && gy >= 0.0 && gx < wf && gy < hf {
-                    let d = dist[gy as usize * w + gx as usize].min(max_dist);
-                    table[((d * scale + 0.5) as usize).min(LOG_P_TABLE_LEN - 1)]
+                    let d = dist[gy as i32 as usize * w + gx as i32 as usize].min(max_dist);
+                    table[((d * scale + 0.5) as i32 as usize).min(LOG_P_TABLE_LEN - 1)]
                 } else {
                     far
                 };
@@ -209,7 +210,13 @@ mod tests {
                 r.min(range_max)
             })
             .collect();
-        LidarScan { ranges_m, angle_min_rad: angle_min, angle_increment_rad: increment, range_min_m: 0.05, range_max_m: range_max }
+        LidarScan {
+            ranges_m,
+            angle_min_rad: angle_min,
+            angle_increment_rad: increment,
+            range_min_m: 0.05,
+            range_max_m: range_max,
+        }
     }
 
     fn spawn_room(world: &mut World, map: OccupancyMap) -> Entity {
@@ -275,7 +282,10 @@ mod tests {
         let mut rotated = ParticleSet::from_poses(&moved);
         add_log_likelihoods(&mut rotated, &scan, &field, &origin, &params);
         for k in 0..2 {
-            assert!((plain.log_w[k] - rotated.log_w[k]).abs() < 1e-2, "particle {k}: {plain:?} vs {rotated:?}");
+            assert!(
+                (plain.log_w[k] - rotated.log_w[k]).abs() < 1e-2,
+                "particle {k}: {plain:?} vs {rotated:?}"
+            );
         }
     }
 

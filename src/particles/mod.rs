@@ -3,12 +3,14 @@
 //! plain kernel over a `ParticleSet` plus a small system; weights are log-weights, Σ exp = 1.
 
 mod estimate;
+mod init;
 mod likelihood_field;
 mod resample;
 mod set;
 mod transition;
 
 pub use estimate::{PoseEstimate, estimate, estimate_pose};
+pub use init::{InitParams, Initialised, Task, draw_initial_set, init_particles};
 pub use likelihood_field::{
     LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,
     mcl_likelihood_field, weigh_likelihood_field,

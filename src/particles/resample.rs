@@ -29,7 +29,10 @@ impl ResampleParams {
     /// Checks the ranges a RON file could get wrong.
     pub fn validate(&self) -> Result<(), ParticleError> {
         if !(0.0..=1.0).contains(&self.alpha) {
-            return Err(ParticleError::InvalidParam { field: "resample.alpha", expected: "a value in [0, 1]" });
+            return Err(ParticleError::InvalidParam {
+                field: "resample.alpha",
+                expected: "a value in [0, 1]",
+            });
         }
         match self.ess_threshold {
             Some(t) if !(0.0..=1.0).contains(&t) => Err(ParticleError::InvalidParam {
@@ -155,7 +158,8 @@ mod tests {
         let mut world = World::new();
         world.insert_resource(ResampleParams { alpha: 1.0, ess_threshold: Some(0.5) });
         let flat = world.spawn((ParticleSet::from_weights(&[1.0; 4]), EpisodeRng::seeded(1))).id();
-        let peaked = world.spawn((ParticleSet::from_weights(&[1.0, 0.0, 0.0, 0.0]), EpisodeRng::seeded(2))).id();
+        let peaked =
+            world.spawn((ParticleSet::from_weights(&[1.0, 0.0, 0.0, 0.0]), EpisodeRng::seeded(2))).id();
         world.run_system_once(resample).expect("resample runs");
         let flat_x = &world.get::<ParticleSet>(flat).expect("flat set").x;
         assert_eq!(flat_x, &vec![0.0, 1.0, 2.0, 3.0], "ESS/N = 1 ≥ 0.5: no resampling");

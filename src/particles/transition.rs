@@ -82,7 +82,10 @@ mod tests {
         let e = world.spawn((set, odometry, EpisodeRng::seeded(5))).id();
         world.run_system_once(transition).expect("transition runs");
         let set = world.get::<ParticleSet>(e).expect("set");
-        assert!((set.x[0] - 1.0).abs() < 1e-5 && (set.y[0] - 1.5).abs() < 1e-5, "facing +y moves +y: {set:?}");
+        assert!(
+            (set.x[0] - 1.0).abs() < 1e-5 && (set.y[0] - 1.5).abs() < 1e-5,
+            "facing +y moves +y: {set:?}"
+        );
         assert!(angle_error(set.yaw[0], FRAC_PI_2 + 0.25) < 1e-5, "heading turns by Δyaw");
         assert!((set.x[1] - 0.5).abs() < 1e-5 && set.y[1].abs() < 1e-5, "facing +x moves +x: {set:?}");
     }
