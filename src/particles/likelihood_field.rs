@@ -8,7 +8,7 @@
 //! Σ log p is sharper, so keep `max_beams` moderate (nav2's 60) or lower `z_hit` if particles
 //! starve. The LiDAR is taken to sit at the robot centre, facing ahead.
 
-use crate::particles::set::{FilterHealth, Guard, ParticleSet};
+use crate::particles::set::{FilterHealth, Guard, ParticleError, ParticleSet};
 use crate::sense::LidarScan;
 use crate::world::map::DistanceField;
 use crate::world::{OccupancyMap, OnMap, Pose2};
@@ -91,14 +91,20 @@ fn log_p_table(params: &LikelihoodFieldParams, range_max_m: f32) -> Vec<f32> {
 /// Adds each particle's Σ log p over the used beams to its log-weight (no normalisation).
 /// `origin` is the world pose of the field's cell (0, 0) corner (the OccupancyMap origin); the
 /// field's own width/height/resolution give the rest of the geometry. Particles with a
-/// non-finite pose get a NaN log-weight, for the guard to drop.
+/// non-finite pose get a NaN log-weight, for the guard to drop. Errors (leaving the set
+/// untouched) when the field holds fewer than width × height distances.
 pub fn add_log_likelihoods(
     set: &mut ParticleSet,
     scan: &LidarScan,
     field: &DistanceField,
     origin: &Pose2,
     params: &LikelihoodFieldParams,
-) {
+) -> Result<(), ParticleError> {
+    let cells = field.width * field.height;
+    let Some(dist) = field.distances_m.get(..cells) else {
+        let found = field.distances_m.len();
+        return Err(ParticleError::MalformedLayer { layer: "DistanceField", expected: cells, found });
+    };
     let inv_res = 1.0 / field.resolution_m;
     let beams = beam_offsets(scan, params.max_beams, field.resolution_m);
     let table = log_p_table(params, scan.range_max_m);
@@ -106,13 +112,12 @@ pub fn add_log_likelihoods(
     let scale = (LOG_P_TABLE_LEN - 1) as f32 / params.laser_likelihood_max_dist.max(1e-6);
     let max_dist = params.laser_likelihood_max_dist;
     let (w, wf, hf) = (field.width, field.width as f32, field.height as f32);
-    let dist = &field.distances_m[..field.width * field.height];
     let (so, co) = origin.yaw.sin_cos();
     let ParticleSet { x, y, yaw, log_w } = set;
-    log_w.par_chunks_mut(LIKELIHOOD_CHUNK).enumerate().for_each(|(chunk, lws)| {
-        let start = chunk * LIKELIHOOD_CHUNK;
-        for (k, lw) in lws.iter_mut().enumerate() {
-            let (px, py, pyaw) = (x[start + k], y[start + k], yaw[start + k]);
+    let chunks = log_w.par_chunks_mut(LIKELIHOOD_CHUNK).zip(x.par_chunks(LIKELIHOOD_CHUNK));
+    let chunks = chunks.zip(y.par_chunks(LIKELIHOOD_CHUNK)).zip(yaw.par_chunks(LIKELIHOOD_CHUNK));
+    chunks.for_each(|(((lws, xs), ys), yaws)| {
+        for (((lw, &px), &py), &pyaw) in lws.iter_mut().zip(xs).zip(ys).zip(yaws) {
             if !(px.is_finite() && py.is_finite() && pyaw.is_finite()) {
                 *lw = f32::NAN;
                 continue;
@@ -136,6 +141,7 @@ pub fn add_log_likelihoods(
             *lw += sum;
         }
     });
+    Ok(())
 }
 
 /// The full observation update: adds the log-likelihoods, then normalises through the guard
@@ -146,12 +152,12 @@ pub fn weigh_likelihood_field(
     field: &DistanceField,
     origin: &Pose2,
     params: &LikelihoodFieldParams,
-) -> Guard {
+) -> Result<Guard, ParticleError> {
     if set.is_empty() {
-        return Guard::Clean;
+        return Ok(Guard::Clean);
     }
-    add_log_likelihoods(set, scan, field, origin, params);
-    set.normalise_guarded()
+    add_log_likelihoods(set, scan, field, origin, params)?;
+    Ok(set.normalise_guarded())
 }
 
 /// Reads LidarScan, OnMap → the map's OccupancyMap (origin) and DistanceField,
@@ -166,8 +172,10 @@ pub fn mcl_likelihood_field(
             tracing::warn!("mcl_likelihood_field: map {:?} has no OccupancyMap + DistanceField", on_map.0);
             continue;
         };
-        if weigh_likelihood_field(&mut set, scan, field, &map.origin, &params) == Guard::ResetToUniform {
-            health.degeneracies += 1;
+        match weigh_likelihood_field(&mut set, scan, field, &map.origin, &params) {
+            Ok(Guard::ResetToUniform) => health.degeneracies += 1,
+            Ok(_) => {}
+            Err(e) => tracing::warn!("mcl_likelihood_field: {e}"),
         }
     }
 }
@@ -275,18 +283,29 @@ mod tests {
         let (field, scan) = (brute_field(&map), marched_scan(&map, truth));
         let probe = Pose2::new(0.7, 0.5, 0.2);
         let mut plain = ParticleSet::from_poses(&[truth, probe]);
-        add_log_likelihoods(&mut plain, &scan, &field, &Pose2::default(), &params);
+        add_log_likelihoods(&mut plain, &scan, &field, &Pose2::default(), &params).expect("valid field");
         // Same room placed in the world at a rotated origin; particles move with it.
         let origin = Pose2::new(1.0, -2.0, 0.7);
         let moved: Vec<Pose2> = [truth, probe].iter().map(|p| origin.compose(p)).collect();
         let mut rotated = ParticleSet::from_poses(&moved);
-        add_log_likelihoods(&mut rotated, &scan, &field, &origin, &params);
+        add_log_likelihoods(&mut rotated, &scan, &field, &origin, &params).expect("valid field");
         for k in 0..2 {
             assert!(
                 (plain.log_w[k] - rotated.log_w[k]).abs() < 1e-2,
                 "particle {k}: {plain:?} vs {rotated:?}"
             );
         }
+    }
+
+    #[test]
+    fn likelihood_rejects_short_field() {
+        let map = tiny_room();
+        let mut field = brute_field(&map);
+        field.distances_m.truncate(10);
+        let mut set = ParticleSet::from_poses(&[Pose2::new(0.6, 0.6, 0.0)]);
+        let scan = marched_scan(&map, Pose2::new(0.6, 0.6, 0.0));
+        let r = weigh_likelihood_field(&mut set, &scan, &field, &map.origin, &Default::default());
+        assert!(matches!(r, Err(ParticleError::MalformedLayer { .. })), "short field is an error, got {r:?}");
     }
 
     #[test]

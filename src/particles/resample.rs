@@ -73,10 +73,11 @@ pub fn systematic_indices(q: &[f64], n: usize, rng: &mut impl Rng) -> Vec<usize>
 }
 
 /// Resamples `set` in place (same count) from q = α·w + (1−α)/K; new log-weights log(w/q),
-/// normalised. `alpha` is clamped to [0, 1]. Empty sets are left alone.
+/// normalised. `alpha` is clamped to [0, 1]. Empty or ragged sets (arrays of unequal length)
+/// are left alone.
 pub fn resample_soft(set: &mut ParticleSet, alpha: f32, rng: &mut impl Rng) {
     let n = set.len();
-    if n == 0 {
+    if n == 0 || set.x.len() != n || set.y.len() != n || set.yaw.len() != n {
         return;
     }
     let alpha = alpha.clamp(0.0, 1.0) as f64;

@@ -47,8 +47,8 @@ pub enum ParticleError {
     ZeroParticles,
     #[error("the traversable map has no cell to draw particles from")]
     NoTraversableCells,
-    #[error("robot's map entity {entity} lacks {missing}")]
-    MissingMapLayer { entity: String, missing: &'static str },
+    #[error("map layer `{layer}` is malformed: expected {expected} cells, found {found}")]
+    MalformedLayer { layer: &'static str, expected: usize, found: usize },
     #[error("parameter `{field}` out of range: expected {expected}")]
     InvalidParam { field: &'static str, expected: &'static str },
 }
