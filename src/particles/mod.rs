@@ -1,1 +1,20 @@
-//! ② Particles: the particle set and the filter steps (init, transition, likelihood, resampling, estimate).
+//! ② Particles: the particle set and the filter steps, in the order a step runs them:
+//! init (fills empty sets) → transition → likelihood_field → resample → estimate. Each step is a
+//! plain kernel over a `ParticleSet` plus a small system; weights are log-weights, Σ exp = 1.
+
+mod estimate;
+mod init;
+mod likelihood_field;
+mod resample;
+mod set;
+mod transition;
+
+pub use estimate::{PoseEstimate, estimate, estimate_pose};
+pub use init::{InitParams, Initialised, Task, draw_initial_set, init_particles};
+pub use likelihood_field::{
+    LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,
+    mcl_likelihood_field, weigh_likelihood_field,
+};
+pub use resample::{ResampleParams, resample, resample_soft, should_resample, systematic_indices};
+pub use set::{Degenerate, FilterHealth, Guard, ParticleError, ParticleSet};
+pub use transition::{TRANSITION_CHUNK, TransitionParams, propagate, transition};

@@ -1,0 +1,299 @@
+//! Initial particle sets for the paper's three tasks: tracking (Gaussian around a perturbed true
+//! pose), semi-global (uniform over traversable cells in a box around such a guess) and global
+//! (uniform over every traversable cell).
+//!
+//! Contract: an episode reset clears a robot's `ParticleSet`; `init_particles` fills every empty
+//! set and leaves non-empty ones alone, so it can run every step at no cost.
+
+use crate::particles::set::{FilterHealth, ParticleError, ParticleSet};
+use crate::world::map::TraversableMap;
+use crate::world::{EpisodeRng, OccupancyMap, OnMap, Pose2, TruePose, wrap_angle};
+use bevy::prelude::*;
+use rand::Rng;
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+use std::f32::consts::PI;
+
+/// How much the filter knows about the start pose (paper §V).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Task {
+    Tracking,
+    SemiGlobal,
+    Global,
+}
+
+impl Task {
+    /// The paper's particle counts: tracking 300, semi-global 500, global 3,000.
+    pub fn default_particles(self) -> usize {
+        match self {
+            Task::Tracking => 300,
+            Task::SemiGlobal => 500,
+            Task::Global => 3000,
+        }
+    }
+}
+
+/// How `init_particles` draws a fresh set.
+#[derive(Resource, Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct InitParams {
+    /// Which task's initial belief to draw (default: tracking).
+    pub task: Task,
+    /// Number of particles; `None` = the task's paper default (300 / 500 / 3,000).
+    pub particles: Option<usize>,
+    /// Std-dev of the guess around the true pose and of particles around the guess, metres (paper: 0.3).
+    pub tracking_sigma_m: f32,
+    /// Same, for the heading, degrees (paper: 30).
+    pub tracking_sigma_deg: f32,
+    /// Side of the semi-global box centred on the guess, metres (paper text: 3.3; authors' code: 2.1).
+    pub semi_global_box_m: f32,
+}
+
+impl Default for InitParams {
+    fn default() -> Self {
+        Self {
+            task: Task::Tracking,
+            particles: None,
+            tracking_sigma_m: 0.3,
+            tracking_sigma_deg: 30.0,
+            semi_global_box_m: 3.3,
+        }
+    }
+}
+
+impl InitParams {
+    pub fn particle_count(&self) -> usize {
+        self.particles.unwrap_or(self.task.default_particles())
+    }
+}
+
+/// A freshly drawn set, with what the draw was centred on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Initialised {
+    pub set: ParticleSet,
+    /// The perturbed true pose the set is centred on (`None` for a global draw).
+    pub guess: Option<Pose2>,
+    /// The semi-global box held no traversable cell, so the set was drawn globally instead.
+    pub fell_back_to_global: bool,
+}
+
+/// `pose` perturbed by N(0, σ) on x, y and yaw.
+fn gaussian_around(pose: &Pose2, sigma_m: f32, sigma_rad: f32, rng: &mut impl Rng) -> Pose2 {
+    Pose2::new(
+        pose.x + sigma_m * rng.sample::<f32, _>(StandardNormal),
+        pose.y + sigma_m * rng.sample::<f32, _>(StandardNormal),
+        wrap_angle(pose.yaw + sigma_rad * rng.sample::<f32, _>(StandardNormal)),
+    )
+}
+
+/// `n` poses uniform within the given cells (a cell, then a point inside it), uniform heading.
+fn uniform_in_cells(cells: &[(u32, u32)], n: usize, map: &OccupancyMap, rng: &mut impl Rng) -> Vec<Pose2> {
+    (0..n)
+        .map(|_| {
+            let (i, j) = cells[rng.random_range(0..cells.len())];
+            let (x, y) = map.grid_to_world(i as f32 + rng.random::<f32>(), j as f32 + rng.random::<f32>());
+            Pose2::new(x, y, wrap_angle(rng.random_range(-PI..PI)))
+        })
+        .collect()
+}
+
+/// Draws the initial set for `params.task` around the true pose `truth`. Errors on zero
+/// particles, or when a uniform draw is needed and the traversable map is empty.
+pub fn draw_initial_set(
+    params: &InitParams,
+    truth: &Pose2,
+    map: &OccupancyMap,
+    traversable: &TraversableMap,
+    rng: &mut impl Rng,
+) -> Result<Initialised, ParticleError> {
+    let n = params.particle_count();
+    if n == 0 {
+        return Err(ParticleError::ZeroParticles);
+    }
+    let (sigma_m, sigma_rad) = (params.tracking_sigma_m.abs(), params.tracking_sigma_deg.abs().to_radians());
+    let global = |rng: &mut _| match traversable.cells.is_empty() {
+        true => Err(ParticleError::NoTraversableCells),
+        false => Ok(ParticleSet::from_poses(&uniform_in_cells(&traversable.cells, n, map, rng))),
+    };
+    match params.task {
+        Task::Tracking => {
+            let guess = gaussian_around(truth, sigma_m, sigma_rad, rng);
+            let poses: Vec<Pose2> =
+                (0..n).map(|_| gaussian_around(&guess, sigma_m, sigma_rad, rng)).collect();
+            Ok(Initialised {
+                set: ParticleSet::from_poses(&poses),
+                guess: Some(guess),
+                fell_back_to_global: false,
+            })
+        }
+        Task::SemiGlobal => {
+            let guess = gaussian_around(truth, sigma_m, sigma_rad, rng);
+            let half = params.semi_global_box_m.abs() / 2.0;
+            let in_box: Vec<(u32, u32)> = (traversable.cells.iter().copied())
+                .filter(|&(i, j)| {
+                    let (x, y) = map.cell_center(i as usize, j as usize);
+                    (x - guess.x).abs() <= half && (y - guess.y).abs() <= half
+                })
+                .collect();
+            if in_box.is_empty() {
+                return Ok(Initialised { set: global(rng)?, guess: Some(guess), fell_back_to_global: true });
+            }
+            let set = ParticleSet::from_poses(&uniform_in_cells(&in_box, n, map, rng));
+            Ok(Initialised { set, guess: Some(guess), fell_back_to_global: false })
+        }
+        Task::Global => Ok(Initialised { set: global(rng)?, guess: None, fell_back_to_global: false }),
+    }
+}
+
+/// Reads TruePose, OnMap → the map's OccupancyMap + TraversableMap, InitParams. Writes empty
+/// ParticleSets (filled), EpisodeRng, FilterHealth.reinitialisations (semi-global fell back to global).
+pub fn init_particles(
+    params: Res<InitParams>,
+    maps: Query<(&OccupancyMap, &TraversableMap)>,
+    mut robots: Query<(&TruePose, &OnMap, &mut ParticleSet, &mut EpisodeRng, &mut FilterHealth)>,
+) {
+    for (truth, on_map, mut set, mut rng, mut health) in &mut robots {
+        if !set.is_empty() {
+            continue;
+        }
+        let Ok((map, traversable)) = maps.get(on_map.0) else {
+            tracing::warn!("init_particles: map {:?} has no OccupancyMap + TraversableMap", on_map.0);
+            continue;
+        };
+        match draw_initial_set(&params, &truth.0, map, traversable, &mut rng.0) {
+            Ok(init) => {
+                health.reinitialisations += u32::from(init.fell_back_to_global);
+                *set = init.set;
+            }
+            Err(e) => tracing::warn!("init_particles: {e}"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::tiny_room;
+    use crate::world::Cell;
+    use crate::world::rng::stream;
+    use bevy::ecs::system::RunSystemOnce;
+
+    /// Every free cell of the map (no erosion), built by hand.
+    fn free_cells(map: &OccupancyMap) -> TraversableMap {
+        let traversable: Vec<bool> = map.cells.iter().map(|c| *c == Cell::Free).collect();
+        let cells = (0..map.height as u32)
+            .flat_map(|j| (0..map.width as u32).map(move |i| (i, j)))
+            .filter(|&(i, j)| traversable[j as usize * map.width + i as usize])
+            .collect();
+        TraversableMap { width: map.width, height: map.height, traversable, cells }
+    }
+
+    fn on_traversable(set: &ParticleSet, map: &OccupancyMap, t: &TraversableMap) -> bool {
+        (0..set.len())
+            .all(|k| map.cell_at(set.x[k], set.y[k]).is_some_and(|(i, j)| t.traversable[j * t.width + i]))
+    }
+
+    #[test]
+    fn init_particles_fills_only_empty_sets() {
+        let mut world = World::new();
+        world.insert_resource(InitParams::default());
+        let map = tiny_room();
+        let traversable = free_cells(&map);
+        let m = world.spawn((map, traversable)).id();
+        let truth = TruePose(Pose2::new(1.0, 0.5, 0.0));
+        let empty = world.spawn((truth, OnMap(m), ParticleSet::default(), EpisodeRng::seeded(1))).id();
+        let kept = ParticleSet::from_weights(&[1.0, 1.0]);
+        let full = world.spawn((truth, OnMap(m), kept.clone(), EpisodeRng::seeded(2))).id();
+        world.run_system_once(init_particles).expect("init_particles runs");
+        let filled = world.get::<ParticleSet>(empty).expect("set");
+        assert_eq!(filled.len(), 300, "tracking default is 300 particles");
+        assert!((filled.weights().iter().sum::<f32>() - 1.0).abs() < 1e-4, "uniform, normalised");
+        assert_eq!(world.get::<ParticleSet>(full), Some(&kept), "non-empty sets are left alone");
+    }
+
+    #[test]
+    fn init_tracking_spreads_around_guess() {
+        let (map, truth) = (tiny_room(), Pose2::new(1.0, 0.5, 3.0));
+        let params = InitParams { particles: Some(4000), ..Default::default() };
+        let init = draw_initial_set(&params, &truth, &map, &free_cells(&map), &mut stream(&[4]))
+            .expect("tracking draw");
+        let guess = init.guess.expect("tracking has a guess");
+        let n = init.set.len() as f32;
+        let sx = (init.set.x.iter().map(|x| (x - guess.x).powi(2)).sum::<f32>() / n).sqrt();
+        let syaw = (init.set.yaw.iter().map(|a| wrap_angle(a - guess.yaw).powi(2)).sum::<f32>() / n).sqrt();
+        assert!((sx - 0.3).abs() < 0.02, "x spread about the guess ≈ 0.3 m, got {sx}");
+        assert!((syaw.to_degrees() - 30.0).abs() < 2.0, "yaw spread ≈ 30°, got {}", syaw.to_degrees());
+        assert!(guess.distance(&truth) < 1.5, "guess is a perturbed truth: {guess:?}");
+    }
+
+    #[test]
+    fn init_semi_global_stays_in_box_on_traversable_cells() {
+        let map = tiny_room();
+        let t = free_cells(&map);
+        let params = InitParams { task: Task::SemiGlobal, semi_global_box_m: 0.6, ..Default::default() };
+        let init = draw_initial_set(&params, &Pose2::new(1.0, 0.5, 0.0), &map, &t, &mut stream(&[5]))
+            .expect("semi-global draw");
+        let g = init.guess.expect("guess");
+        assert_eq!(init.set.len(), 500);
+        assert!(!init.fell_back_to_global, "the box around {g:?} holds free cells");
+        let in_box =
+            (0..500).all(|k| (init.set.x[k] - g.x).abs() <= 0.35 && (init.set.y[k] - g.y).abs() <= 0.35);
+        assert!(in_box, "particles within box ± half a cell");
+        assert!(on_traversable(&init.set, &map, &t), "particles lie on traversable cells");
+        let spread = init.set.yaw.iter().fold((f32::MAX, f32::MIN), |(a, b), &y| (a.min(y), b.max(y)));
+        assert!(spread.0 < -2.5 && spread.1 > 2.5, "yaw is uniform over the circle: {spread:?}");
+    }
+
+    #[test]
+    fn init_particles_counts_semi_global_fallback() {
+        let mut world = World::new();
+        world.insert_resource(InitParams { task: Task::SemiGlobal, ..Default::default() });
+        let map = tiny_room();
+        let mut t = free_cells(&map);
+        t.cells.retain(|&(i, _)| i == 18); // only the far right column is traversable
+        let m = world.spawn((map, t)).id();
+        // True pose 20 m off, so the 3.3 m box around any plausible guess misses the map.
+        let truth = TruePose(Pose2::new(-20.0, 0.5, 0.0));
+        let r = world.spawn((truth, OnMap(m), ParticleSet::default(), EpisodeRng::seeded(3))).id();
+        world.run_system_once(init_particles).expect("init_particles runs");
+        assert_eq!(world.get::<FilterHealth>(r).expect("health").reinitialisations, 1, "fallback counted");
+        let set = world.get::<ParticleSet>(r).expect("set");
+        assert_eq!(set.len(), 500);
+        assert!(set.x.iter().all(|&x| (1.8..1.9).contains(&x)), "drawn globally from column 18");
+    }
+
+    #[test]
+    fn init_rejects_zero_particles_and_empty_maps() {
+        let map = tiny_room();
+        let mut t = free_cells(&map);
+        let zero = InitParams { particles: Some(0), ..Default::default() };
+        let err = draw_initial_set(&zero, &Pose2::default(), &map, &t, &mut stream(&[6]));
+        assert_eq!(err, Err(ParticleError::ZeroParticles));
+        t.cells.clear();
+        let global = InitParams { task: Task::Global, ..Default::default() };
+        let err = draw_initial_set(&global, &Pose2::default(), &map, &t, &mut stream(&[6]));
+        assert_eq!(err, Err(ParticleError::NoTraversableCells));
+    }
+
+    #[test]
+    fn init_global_covers_traversable_cells() {
+        let map = tiny_room();
+        let t = free_cells(&map);
+        let params = InitParams { task: Task::Global, ..Default::default() };
+        let init = draw_initial_set(&params, &Pose2::default(), &map, &t, &mut stream(&[8])).expect("global");
+        assert_eq!(init.set.len(), 3000);
+        assert!(on_traversable(&init.set, &map, &t), "global particles lie on traversable cells");
+        let (xs, ys) = (&init.set.x, &init.set.y);
+        let span =
+            |v: &[f32]| v.iter().fold(f32::MIN, |a, &b| a.max(b)) - v.iter().fold(f32::MAX, |a, &b| a.min(b));
+        assert!(span(xs) > 1.6 && span(ys) > 1.1, "spread over the whole room: {} × {}", span(xs), span(ys));
+    }
+
+    #[test]
+    fn init_task_names_are_snake_case() {
+        let p: InitParams = ron::from_str("(task: semi_global, particles: Some(42))").expect("parses");
+        assert_eq!((p.task, p.particle_count()), (Task::SemiGlobal, 42));
+        assert!(ron::from_str::<InitParams>("(tsak: global)").is_err(), "unknown fields are rejected");
+    }
+}
