@@ -18,6 +18,8 @@ pub mod episode;
 
 pub mod compose;
 
+pub mod eval;
+
 pub mod plugin;
 
 pub mod cli;

@@ -1,6 +1,7 @@
 //! `ApfnPlugin`: adds apfn's resources, stages and a validated pipeline to any bevy `App`.
 
 use crate::compose::Pipeline;
+use crate::episode::CompletedEpisodes;
 use crate::world::SimClock;
 use bevy::prelude::*;
 
@@ -46,6 +47,7 @@ impl Plugin for ApfnPlugin {
     fn build(&self, app: &mut App) {
         use ApfnSet::*;
         app.init_resource::<SimClock>()
+            .init_resource::<CompletedEpisodes>()
             .configure_sets(Update, (Episode, Sense, Particles, Belief, Evaluate, Agent, Act).chain())
             .add_systems(Update, tick_clock.after(Act));
         self.pipeline.install(app);

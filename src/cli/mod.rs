@@ -1,5 +1,6 @@
 //! The `apfn` command line: one file per subcommand; `main.rs` only parses and dispatches.
 
+pub mod eval;
 pub mod map;
 pub mod run;
 pub mod systems;
@@ -21,6 +22,8 @@ pub enum Command {
     Map(map::MapCommand),
     /// Run a scene headless with a schedule of systems and record the trajectories.
     Run(run::RunArgs),
+    /// Evaluate localizers × policies × tasks × maps and write the paper-style tables.
+    Eval(eval::EvalArgs),
     /// List the registered systems with their parameters.
     #[command(subcommand)]
     Systems(systems::SystemsCommand),
@@ -31,6 +34,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Map(cmd) => map::run(cmd),
         Command::Run(args) => run::run(args),
+        Command::Eval(args) => eval::run(args),
         Command::Systems(cmd) => systems::run(cmd),
     }
 }

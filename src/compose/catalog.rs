@@ -4,7 +4,7 @@
 use crate::act::{drive, physics};
 use crate::agent::random_policy;
 use crate::compose::registry::{NoParams, Registry, SystemSpec};
-use crate::episode::episode_reset;
+use crate::episode::{episode_reset, step_metrics};
 use crate::particles::{
     InitParams, LikelihoodFieldParams, ResampleParams, TransitionParams, estimate, init_particles,
     mcl_likelihood_field, resample, transition,
@@ -64,6 +64,10 @@ pub fn standard_registry() -> Registry {
     .register::<NoParams, _, _>(
         spec("estimate", Particles, "Reads ParticleSet. Writes PoseEstimate.", &["ParticleSet"], &["PoseEstimate"]),
         estimate,
+    )
+    .register::<NoParams, _, _>(
+        spec("step_metrics", Evaluate, "Reads TruePose, PoseEstimate, Episode. Writes StepError, EpisodeLog, CompletedEpisodes.", &["PoseEstimate"], &["StepError"]),
+        step_metrics,
     )
     .register::<NoParams, _, _>(
         spec("random_policy", Agent, "Reads EpisodeRng. Writes Action.", &[], &["Action"]),

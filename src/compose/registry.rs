@@ -15,6 +15,8 @@ pub trait ConfiguredSystem: Send + Sync {
     fn install(&self, app: &mut App, slot: StepSlot, stage: ApfnSet);
     /// The parameters as pretty RON, for listings.
     fn params_ron(&self) -> String;
+    /// A copy, so one validated pipeline can configure many worlds.
+    fn boxed_clone(&self) -> Box<dyn ConfiguredSystem>;
 }
 
 /// The position of a step in its schedule file; slots run in file order.
@@ -82,6 +84,10 @@ where
     fn params_ron(&self) -> String {
         ron::ser::to_string_pretty(&self.params, ron::ser::PrettyConfig::default().struct_names(true))
             .unwrap_or_else(|e| format!("<unprintable: {e}>"))
+    }
+
+    fn boxed_clone(&self) -> Box<dyn ConfiguredSystem> {
+        Box::new(WithParams { params: self.params.clone(), system: self.system, marker: PhantomData })
     }
 }
 

@@ -20,7 +20,14 @@ pub struct PipelineStep {
     pub system: Box<dyn ConfiguredSystem>,
 }
 
+impl Clone for PipelineStep {
+    fn clone(&self) -> Self {
+        Self { name: self.name, stage: self.stage, system: self.system.boxed_clone() }
+    }
+}
+
 /// A validated schedule: the systems of one agent step, in order.
+#[derive(Clone)]
 pub struct Pipeline {
     pub source: PathBuf,
     pub steps: Vec<PipelineStep>,
@@ -197,5 +204,66 @@ impl<'de> DeserializeSeed<'de> for ParamsSeed<'_> {
         self.0
             .parse_params(&mut erased)
             .map_err(|e| de::Error::custom(format!("parameters of `{}`: {e}", self.0.name)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compose::standard_registry;
+
+    fn parse(text: &str) -> Result<Pipeline, ComposeError> {
+        Pipeline::parse(text, Path::new("test.ron"), &standard_registry())
+    }
+
+    fn message(text: &str) -> String {
+        parse(text).err().expect("schedule must be rejected").to_string()
+    }
+
+    #[test]
+    fn schedule_parses_steps_in_order_with_params() {
+        let p = parse(
+            r#"Schedule(steps: [("lidar", ()), ("init_particles", ()), ("resample", (alpha: 1.0)), ("random_policy", ())])"#,
+        );
+        let p = p.expect("valid schedule");
+        assert_eq!(p.names(), ["lidar", "init_particles", "resample", "random_policy"]);
+        assert!(p.steps[2].system.params_ron().contains("alpha: 1.0"), "given parameters are kept");
+    }
+
+    #[test]
+    fn schedule_unknown_system_names_position_and_suggests() {
+        let m = message("Schedule(steps: [\n  (\"lidr\", ()),\n])");
+        assert!(m.starts_with("test.ron:2:"), "error must point at line 2: {m}");
+        assert!(m.contains("did you mean `lidar`"), "nearest name suggested: {m}");
+        assert!(m.contains("odometry"), "known names listed: {m}");
+    }
+
+    #[test]
+    fn schedule_bad_parameter_names_field_and_place() {
+        let m = message("Schedule(steps: [\n (\"resample\", (alpha: \"half\")),\n])");
+        assert!(m.starts_with("test.ron:2:"), "error must point at line 2: {m}");
+        assert!(m.contains("resample"), "the system is named: {m}");
+        let m = message(r#"Schedule(steps: [("resample", (alfa: 0.5))])"#);
+        assert!(m.contains("alfa") && m.contains("alpha"), "unknown field and the expected ones: {m}");
+    }
+
+    #[test]
+    fn schedule_rejects_wrong_stage_order() {
+        let m = message(r#"Schedule(steps: [("random_policy", ()), ("lidar", ())])"#);
+        assert!(m.contains("step 2 `lidar`") && m.contains("random_policy"), "{m}");
+    }
+
+    #[test]
+    fn schedule_rejects_unmet_needs() {
+        let m = message(r#"Schedule(steps: [("lidar", ()), ("transition", ())])"#);
+        assert!(m.contains("needs ParticleSet") && m.contains("init_particles"), "{m}");
+        let m = message(r#"Schedule(steps: [("init_particles", ()), ("mcl_likelihood_field", ())])"#);
+        assert!(m.contains("needs LidarScan") && m.contains("lidar"), "a likelihood needs a sensor first: {m}");
+    }
+
+    #[test]
+    fn schedule_rejects_duplicates_and_syntax_errors() {
+        assert!(message(r#"Schedule(steps: [("lidar", ()), ("lidar", ())])"#).contains("twice"));
+        assert!(message(r#"Schedule(steps: [("lidar", ()"#).starts_with("test.ron:1:"));
     }
 }

@@ -5,11 +5,12 @@ use crate::act::{Collided, DriveCommand, MapPhysics};
 use crate::agent::Action;
 use crate::compose::error::ComposeError;
 use crate::compose::scene::{LoadedScene, NamedMap};
-use crate::episode::Episode;
+use crate::episode::{Episode, EpisodeLog, StepError};
+use crate::particles::{FilterHealth, ParticleSet, PoseEstimate};
 use crate::world::map::{DistanceField, NetworkMap, TraversableMap};
 use crate::world::rng::stream;
 use crate::world::{EpisodeRng, OnMap, Pose2, PreviousPose, Robot, TruePose};
-use crate::sense::{LidarScan, Odometry};
+use crate::sense::{DepthStrip, LidarScan, LocalGrid, Odometry, RayGrid};
 use bevy::prelude::*;
 
 /// Names a map entity, as results and trajectories refer to it.
@@ -55,7 +56,7 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
                 MapName(name.clone()),
                 NetworkMap::from_fine(map, NETWORK_RESOLUTION_M),
                 DistanceField::build(map),
-                crate::sense::RayGrid::from_map(map),
+                RayGrid::from_map(map),
                 traversable,
                 physics,
                 map.clone(),
@@ -66,7 +67,9 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
                 .spawn((
                     (Robot, TruePose(start), PreviousPose(start), OnMap(map_entity), body, rng),
                     (Action::default(), DriveCommand::default(), Collided::default(), Episode::default()),
-                    (LidarScan::default(), Odometry::default()),
+                    (LidarScan::default(), LocalGrid::default(), DepthStrip::default(), Odometry::default()),
+                    (ParticleSet::default(), PoseEstimate::default(), FilterHealth::default()),
+                    (StepError::default(), EpisodeLog::default()),
                 ))
                 .id();
             robots.push(robot);

@@ -50,7 +50,7 @@ pub struct EpisodeLog {
 }
 
 /// One finished episode, as the evaluation harness aggregates it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct EpisodeRecord {
     pub robot: Entity,
     pub episode: u32,

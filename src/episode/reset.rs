@@ -1,6 +1,7 @@
 //! Fixed-length episodes: when one ends, the robot restarts at a new random traversable pose.
 
 use crate::act::{MapPhysics, PhysicsBody};
+use crate::particles::ParticleSet;
 use crate::world::map::TraversableMap;
 use crate::world::{EpisodeRng, OccupancyMap, OnMap, PreviousPose, TruePose};
 use bevy::prelude::*;
@@ -33,14 +34,24 @@ pub struct Episode {
 pub struct EpisodeStart;
 
 /// Reads EpisodeParams, the map's OccupancyMap and TraversableMap. Writes Episode, TruePose,
-/// PreviousPose, MapPhysics, EpisodeRng, EpisodeStart.
+/// PreviousPose, MapPhysics, EpisodeRng, EpisodeStart, and empties the ParticleSet so that
+/// `init_particles` draws a fresh one for the new episode.
 pub fn episode_reset(
     params: Res<EpisodeParams>,
     mut commands: Commands,
     mut maps: Query<(&OccupancyMap, &TraversableMap, &mut MapPhysics)>,
-    mut robots: Query<(Entity, &OnMap, &PhysicsBody, &mut Episode, &mut TruePose, &mut PreviousPose, &mut EpisodeRng)>,
+    mut robots: Query<(
+        Entity,
+        &OnMap,
+        &PhysicsBody,
+        &mut Episode,
+        &mut TruePose,
+        &mut PreviousPose,
+        &mut EpisodeRng,
+        Option<&mut ParticleSet>,
+    )>,
 ) {
-    for (robot, on_map, body, mut episode, mut pose, mut previous, mut rng) in &mut robots {
+    for (robot, on_map, body, mut episode, mut pose, mut previous, mut rng, particles) in &mut robots {
         commands.entity(robot).remove::<EpisodeStart>();
         if episode.step >= params.steps {
             let Ok((map, traversable, mut physics)) = maps.get_mut(on_map.0) else { continue };
@@ -48,10 +59,56 @@ pub fn episode_reset(
             physics.teleport(*body, start);
             (pose.0, previous.0) = (start, start);
             *episode = Episode { index: episode.index + 1, step: 0 };
+            if let Some(mut particles) = particles {
+                *particles = ParticleSet::default();
+            }
         }
         if episode.step == 0 {
             commands.entity(robot).insert(EpisodeStart);
         }
         episode.step += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::tiny_room;
+    use crate::world::Pose2;
+    use bevy::ecs::system::RunSystemOnce;
+
+    #[test]
+    fn episode_reset_restarts_after_the_last_step() {
+        let map = tiny_room();
+        let traversable = TraversableMap::build(&map, 0.18).unwrap();
+        let mut physics = MapPhysics::from_map(&map, 0.1);
+        let start = Pose2::new(0.5, 0.5, 0.0);
+        let body = physics.add_robot(start, 0.18, false);
+        let mut world = World::new();
+        world.insert_resource(EpisodeParams { steps: 2 });
+        let map_entity = world.spawn((map, traversable, physics)).id();
+        let robot = world
+            .spawn((
+                OnMap(map_entity),
+                body,
+                Episode::default(),
+                TruePose(start),
+                PreviousPose(start),
+                EpisodeRng::seeded(1),
+                ParticleSet::from_poses(&[start]),
+            ))
+            .id();
+        world.run_system_once(episode_reset).unwrap();
+        assert!(world.get::<EpisodeStart>(robot).is_some(), "first step starts an episode");
+        assert_eq!(*world.get::<Episode>(robot).unwrap(), Episode { index: 0, step: 1 });
+        world.run_system_once(episode_reset).unwrap();
+        assert!(world.get::<EpisodeStart>(robot).is_none(), "step 2 continues the episode");
+        world.run_system_once(episode_reset).unwrap();
+        assert_eq!(*world.get::<Episode>(robot).unwrap(), Episode { index: 1, step: 1 }, "after 2 steps a new one");
+        assert!(world.get::<EpisodeStart>(robot).is_some());
+        assert!(world.get::<ParticleSet>(robot).unwrap().is_empty(), "the filter restarts with the episode");
+        let pose = world.get::<TruePose>(robot).unwrap().0;
+        assert_ne!(pose, start, "a new random start pose");
+        assert_eq!(world.get::<PreviousPose>(robot).unwrap().0, pose, "odometry must not see the teleport");
     }
 }

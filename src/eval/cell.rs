@@ -1,0 +1,120 @@
+//! One cell of a results table: a schedule (localizer × policy) on one task and one map group,
+//! run for a fixed number of episodes in a single batched world.
+
+use crate::compose::{ComposeError, Pipeline};
+use crate::episode::{CompletedEpisodes, EpisodeRecord, summarize};
+use crate::eval::config::LoadedEval;
+use crate::particles::{InitParams, Task};
+use crate::plugin::{ApfnSet, headless_app};
+use serde::{Deserialize, Serialize};
+
+/// Which schedule, task and map group a cell crosses (indices into the loaded config).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CellSpec {
+    pub schedule: usize,
+    pub task: Task,
+    pub group: usize,
+}
+
+/// One row of results.json / results.csv: exactly the keys.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct ResultRow {
+    pub localizer: String,
+    pub policy: String,
+    pub task: Task,
+    pub split: String,
+    pub map: String,
+    pub particles: usize,
+    pub episodes: usize,
+    pub seed: u64,
+    pub mean_pos_err_m: f32,
+    pub rmse_pos_m: f32,
+    pub final_pos_err_m: f32,
+    pub mean_orient_err_rad: f32,
+    pub final_orient_err_rad: f32,
+    pub success_rate: f32,
+}
+
+/// Every cell of a config: schedules × tasks × map groups, in table order.
+pub fn cells(eval: &LoadedEval) -> Vec<CellSpec> {
+    let mut cells = Vec::new();
+    for schedule in 0..eval.schedules.len() {
+        for &task in &eval.config.tasks {
+            for group in 0..eval.scenes.len() {
+                cells.push(CellSpec { schedule, task, group });
+            }
+        }
+    }
+    cells
+}
+
+/// Agent steps a cell runs: enough whole episodes for every robot to reach `episodes` in total.
+pub fn cell_steps(eval: &LoadedEval, cell: &CellSpec) -> u64 {
+    let scene = &eval.scenes[cell.group];
+    let robots = scene.maps.len() * scene.scene.robots_per_map;
+    (eval.config.episodes.div_ceil(robots) as u64) * eval.config.episode.steps as u64
+}
+
+/// The localizer and policy a schedule runs, for the table: the Particles-stage step that
+/// weighs particles against a sensor, and the Agent-stage policy, without its `_policy` suffix.
+pub fn labels(pipeline: &Pipeline) -> (String, String) {
+    let policy = pipeline
+        .steps
+        .iter()
+        .find(|s| s.stage == ApfnSet::Agent)
+        .map_or("none".into(), |s| s.name.trim_end_matches("_policy").to_owned());
+    let localizer = match pipeline.names().iter().find(|n| n.ends_with("likelihood_field")) {
+        Some(name) if name.starts_with("mcl") => "mcl".to_owned(),
+        Some(name) => name.to_string(),
+        None => "odometry_only".to_owned(),
+    };
+    (localizer, policy)
+}
+
+/// Runs one cell and returns its row and the episodes behind it. `on_step` is called after
+/// every agent step (for progress bars).
+pub fn run_cell(
+    eval: &LoadedEval,
+    cell: &CellSpec,
+    on_step: impl Fn(),
+) -> Result<(ResultRow, Vec<EpisodeRecord>), ComposeError> {
+    let (schedule_path, pipeline) = &eval.schedules[cell.schedule];
+    let scene = &eval.scenes[cell.group];
+    let (localizer, policy) = labels(pipeline);
+    let (mut app, _robots) = headless_app(scene, pipeline.clone())?;
+    let world = app.world_mut();
+    let init = InitParams { task: cell.task, particles: eval.config.particles, ..world.resource::<InitParams>().clone() };
+    let particles = init.particle_count();
+    world.insert_resource(init);
+    world.init_resource::<CompletedEpisodes>();
+    for _ in 0..cell_steps(eval, cell) {
+        app.update();
+        on_step();
+    }
+    let mut records = std::mem::take(&mut app.world_mut().resource_mut::<CompletedEpisodes>().0);
+    records.truncate(eval.config.episodes);
+    let m = summarize(&records).ok_or_else(|| ComposeError::Step {
+        path: schedule_path.clone(),
+        index: 0,
+        name: "step_metrics".into(),
+        message: "no episode finished: the schedule must contain `step_metrics`".into(),
+    })?;
+    let group = &eval.config.maps[cell.group];
+    let row = ResultRow {
+        localizer,
+        policy,
+        task: cell.task,
+        split: group.split_label(),
+        map: group.map_label(),
+        particles,
+        episodes: m.episodes,
+        seed: eval.config.seed,
+        mean_pos_err_m: m.mean_pos_err_m,
+        rmse_pos_m: m.rmse_pos_m,
+        final_pos_err_m: m.final_pos_err_m,
+        mean_orient_err_rad: m.mean_orient_err_rad,
+        final_orient_err_rad: m.final_orient_err_rad,
+        success_rate: m.success_rate,
+    };
+    Ok((row, records))
+}

@@ -1,0 +1,177 @@
+//! Evaluation configs (`apfn eval --config FILE.ron`): which schedules (localizer × policy), tasks
+//! and maps to cross, and how many episodes per cell.
+//!
+//! ```ron
+//! Eval(
+//!     schedules: ["../systems/turn.ron", "../systems/random.ron"],
+//!     tasks: [tracking, semi_global, global],
+//!     maps: [Apartments(split: seen, count: 5), Apartments(split: unseen, count: 5)],
+//!     episodes: 50,
+//! )
+//! ```
+
+use crate::compose::{ComposeError, MapSource, Pipeline, Scene, standard_registry};
+use crate::episode::EpisodeParams;
+use crate::particles::Task;
+use crate::world::RobotParams;
+use crate::world::map::procedural::{ApartmentParams, Split};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(rename = "Eval", deny_unknown_fields)]
+pub struct EvalConfig {
+    /// Schedule files to compare, relative to this file; each is one localizer × policy.
+    pub schedules: Vec<PathBuf>,
+    #[serde(default = "all_tasks")]
+    pub tasks: Vec<Task>,
+    /// Map groups; each is one `split` column of the table.
+    pub maps: Vec<MapGroup>,
+    /// Episodes per cell (paper: 50).
+    #[serde(default = "fifty")]
+    pub episodes: usize,
+    /// Robots driving at once on each map of a cell (batched through every system).
+    #[serde(default = "five")]
+    pub robots_per_map: usize,
+    /// Particle count for every task; `None` keeps the task defaults (300 / 500 / 3,000).
+    #[serde(default)]
+    pub particles: Option<usize>,
+    #[serde(default)]
+    pub seed: u64,
+    #[serde(default)]
+    pub episode: EpisodeParams,
+    #[serde(default)]
+    pub robot: RobotParams,
+}
+
+fn all_tasks() -> Vec<Task> {
+    vec![Task::Tracking, Task::SemiGlobal, Task::Global]
+}
+
+fn fifty() -> usize {
+    50
+}
+
+fn five() -> usize {
+    5
+}
+
+/// One column group of the results table.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub enum MapGroup {
+    /// `count` procedural apartments of a split, starting `first` seeds into its range.
+    Apartments {
+        split: Split,
+        #[serde(default)]
+        first: u64,
+        count: usize,
+    },
+    /// One ROS map (relative to the config file); its split is the map's name.
+    Ros { path: PathBuf },
+}
+
+impl MapGroup {
+    /// The table's `split` label: `seen`, `unseen`, or the ROS map's file stem.
+    pub fn split_label(&self) -> String {
+        match self {
+            MapGroup::Apartments { split: Split::Seen, .. } => "seen".into(),
+            MapGroup::Apartments { split: Split::Unseen, .. } => "unseen".into(),
+            MapGroup::Ros { path } => path.file_stem().map_or("map".into(), |s| s.to_string_lossy().into_owned()),
+        }
+    }
+
+    /// The table's `map` label: the seeds or the file.
+    pub fn map_label(&self) -> String {
+        match self {
+            MapGroup::Apartments { split, first, count } => {
+                let start = split.seeds().start + first;
+                format!("apartments {start}..{}", start + *count as u64)
+            }
+            MapGroup::Ros { path } => path.display().to_string(),
+        }
+    }
+
+    /// Paths stay relative to the config file, which the scene resolves them against.
+    fn map_source(&self) -> MapSource {
+        match self {
+            MapGroup::Apartments { split, first, count } => {
+                MapSource::Procedural { split: *split, first: *first, count: *count, params: ApartmentParams::default() }
+            }
+            MapGroup::Ros { path } => MapSource::Ros { paths: vec![path.clone()] },
+        }
+    }
+}
+
+/// A config with everything it names loaded and validated, before any episode runs.
+pub struct LoadedEval {
+    pub path: PathBuf,
+    pub config: EvalConfig,
+    pub schedules: Vec<(PathBuf, Pipeline)>,
+    /// One loaded scene per map group, in config order.
+    pub scenes: Vec<crate::compose::LoadedScene>,
+}
+
+impl EvalConfig {
+    /// Reads a config and loads every schedule and map it names, so that a typo fails in
+    /// seconds rather than after hours of episodes.
+    pub fn load(path: &Path) -> Result<LoadedEval, ComposeError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ComposeError::Read { path: path.to_owned(), source })?;
+        let config: EvalConfig =
+            ron::Options::default().from_str(&text).map_err(|e| ComposeError::from_ron(path, e))?;
+        config.into_loaded(path)
+    }
+
+    pub fn into_loaded(self, path: &Path) -> Result<LoadedEval, ComposeError> {
+        let invalid = |field: &str, message: String| ComposeError::Scene {
+            path: path.to_owned(),
+            field: field.to_owned(),
+            message,
+        };
+        for (field, empty) in [("schedules", self.schedules.is_empty()), ("tasks", self.tasks.is_empty()), ("maps", self.maps.is_empty())] {
+            if empty {
+                return Err(invalid(field, "expected at least one entry".into()));
+            }
+        }
+        if self.episodes == 0 {
+            return Err(invalid("episodes", "expected at least 1 episode per cell".into()));
+        }
+        if self.particles == Some(0) {
+            return Err(invalid("particles", "expected at least 1 particle (or leave it out for the task defaults)".into()));
+        }
+        let base = path.parent().unwrap_or(Path::new("."));
+        let registry = standard_registry();
+        let schedules = self
+            .schedules
+            .iter()
+            .map(|p| {
+                let pipeline = Pipeline::load(&base.join(p), &registry)?;
+                for needed in ["init_particles", "estimate"] {
+                    if !pipeline.names().contains(&needed) {
+                        return Err(invalid("schedules", format!("{} has no `{needed}` step: it localizes nothing to evaluate", p.display())));
+                    }
+                }
+                Ok((p.clone(), pipeline))
+            })
+            .collect::<Result<Vec<_>, ComposeError>>()?;
+        let scenes = self
+            .maps
+            .iter()
+            .map(|group| {
+                let scene = Scene {
+                    maps: group.map_source(),
+                    robots_per_map: self.robots_per_map,
+                    robots_collide: false,
+                    seed: self.seed,
+                    episode: self.episode.clone(),
+                    robot: self.robot.clone(),
+                    physics: Default::default(),
+                    systems: None,
+                };
+                scene.into_loaded(path)
+            })
+            .collect::<Result<Vec<_>, ComposeError>>()?;
+        Ok(LoadedEval { path: path.to_owned(), config: self, schedules, scenes })
+    }
+}

@@ -1,0 +1,101 @@
+//! Writes evaluation results: results.json (rows), results.csv, and results.md laid out like the
+//! paper's tables (rows = policies, column groups = tasks, one column per split).
+
+use crate::eval::cell::ResultRow;
+use crate::particles::Task;
+use crate::world::map::write_atomically;
+use std::path::Path;
+
+/// Writes the three result files atomically into `out`.
+pub fn write_results(out: &Path, rows: &[ResultRow]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out)?;
+    write_atomically(&out.join("results.json"), serde_json::to_string_pretty(rows)?.as_bytes())?;
+    write_atomically(&out.join("results.csv"), csv(rows).as_bytes())?;
+    write_atomically(&out.join("results.md"), markdown(rows).as_bytes())?;
+    Ok(())
+}
+
+/// One line per row, same keys as the JSON.
+pub fn csv(rows: &[ResultRow]) -> String {
+    let mut text = "localizer,policy,task,split,map,particles,episodes,seed,mean_pos_err_m,rmse_pos_m,\
+                    final_pos_err_m,mean_orient_err_rad,final_orient_err_rad,success_rate\n"
+        .to_owned();
+    for r in rows {
+        text += &format!(
+            "{},{},{},{},\"{}\",{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.3}\n",
+            r.localizer,
+            r.policy,
+            task_name(r.task),
+            r.split,
+            r.map,
+            r.particles,
+            r.episodes,
+            r.seed,
+            r.mean_pos_err_m,
+            r.rmse_pos_m,
+            r.final_pos_err_m,
+            r.mean_orient_err_rad,
+            r.final_orient_err_rad,
+            r.success_rate
+        );
+    }
+    text
+}
+
+pub fn task_name(task: Task) -> &'static str {
+    match task {
+        Task::Tracking => "tracking",
+        Task::SemiGlobal => "semi_global",
+        Task::Global => "global",
+    }
+}
+
+/// One table per localizer: each cell "mean pos cm / mean orient rad (success %)".
+pub fn markdown(rows: &[ResultRow]) -> String {
+    let unique = |f: &dyn Fn(&ResultRow) -> String| {
+        let mut seen: Vec<String> = Vec::new();
+        for r in rows {
+            let v = f(r);
+            if !seen.contains(&v) {
+                seen.push(v);
+            }
+        }
+        seen
+    };
+    let tasks = unique(&|r| task_name(r.task).to_owned());
+    let splits = unique(&|r| r.split.clone());
+    let mut text = String::from(
+        "Each cell: mean position error (cm) / mean |orientation error| (rad) over all steps of all \
+         episodes (the paper's \"RMSE\"), then the success rate.\n",
+    );
+    for localizer in unique(&|r| r.localizer.clone()) {
+        text += &format!("\n### localizer: {localizer}\n\n| policy |");
+        for task in &tasks {
+            for split in &splits {
+                text += &format!(" {task} · {split} |");
+            }
+        }
+        text += &format!("\n|---|{}\n", "---|".repeat(tasks.len() * splits.len()));
+        for policy in unique(&|r| r.policy.clone()) {
+            text += &format!("| {policy} |");
+            for task in &tasks {
+                for split in &splits {
+                    let cell = rows.iter().find(|r| {
+                        r.localizer == localizer && r.policy == policy && task_name(r.task) == task && &r.split == split
+                    });
+                    text += &match cell {
+                        Some(r) => format!(
+                            " {:.1} / {:.2} ({:.0} %) |",
+                            r.mean_pos_err_m * 100.0,
+                            r.mean_orient_err_rad,
+                            r.success_rate * 100.0
+                        ),
+                        None => " – |".to_owned(),
+                    };
+                }
+            }
+            text.push('\n');
+        }
+    }
+    text
+}
