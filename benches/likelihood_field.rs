@@ -43,23 +43,6 @@ fn room() -> OccupancyMap {
     map
 }
 
-/// Exact Euclidean distance field by brute force (setup only).
-fn field(map: &OccupancyMap) -> DistanceField {
-    let blocked: Vec<(i64, i64)> = (0..map.height)
-        .flat_map(|j| (0..map.width).map(move |i| (i, j)))
-        .filter(|&(i, j)| map.get(i, j) == Cell::Occupied)
-        .map(|(i, j)| (i as i64, j as i64))
-        .collect();
-    let mut distances_m = Vec::with_capacity(map.width * map.height);
-    for j in 0..map.height as i64 {
-        for i in 0..map.width as i64 {
-            let d2 = blocked.iter().map(|&(a, b)| (a - i).pow(2) + (b - j).pow(2)).min().unwrap_or(0);
-            distances_m.push((d2 as f32).sqrt() * map.resolution_m);
-        }
-    }
-    DistanceField { width: map.width, height: map.height, resolution_m: map.resolution_m, distances_m }
-}
-
 /// A 100-ray 240° scan marched in 5 mm steps; range_max is large so every beam is used.
 fn scan(map: &OccupancyMap, pose: Pose2) -> LidarScan {
     let fov = 240f32.to_radians();
@@ -85,7 +68,7 @@ fn scan(map: &OccupancyMap, pose: Pose2) -> LidarScan {
 
 fn bench(c: &mut Criterion) {
     let map = room();
-    let field = field(&map);
+    let field = DistanceField::build(&map);
     let scan = scan(&map, Pose2::new(2.5, 4.0, 0.4));
     let mut rng = stream(&[2024]);
     let poses: Vec<Pose2> = (0..PARTICLES)

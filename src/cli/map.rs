@@ -1,8 +1,8 @@
 //! `apfn map …`: inspect a ROS map, render a map to PNG, export procedural apartments as ROS maps.
 
 use crate::world::RobotParams;
-use crate::world::map::{Cell, OccupancyMap, TraversableMap, load_ros_map, save_ros_map, write_atomically};
 use crate::world::map::procedural::{ApartmentParams, generate_apartment};
+use crate::world::map::{Cell, OccupancyMap, TraversableMap, load_ros_map, save_ros_map, write_atomically};
 use anyhow::{Context, bail};
 use image::{ImageFormat, Rgb, RgbImage};
 use std::io::Cursor;

@@ -10,7 +10,9 @@ use crate::particles::{
     mcl_likelihood_field, resample, transition,
 };
 use crate::plugin::ApfnSet::{self, *};
-use crate::sense::{DepthParams, LidarParams, LocalGridParams, OdometryParams, depth, lidar, local_grid, odometry};
+use crate::sense::{
+    DepthParams, LidarParams, LocalGridParams, OdometryParams, depth, lidar, local_grid, odometry,
+};
 
 fn spec(
     name: &'static str,
@@ -26,11 +28,23 @@ fn spec(
 pub fn standard_registry() -> Registry {
     let mut r = Registry::default();
     r.register::<NoParams, _, _>(
-        spec("episode_reset", Episode, "Reads EpisodeParams, maps. Writes Episode, TruePose, physics, EpisodeStart.", &[], &["EpisodeStart"]),
+        spec(
+            "episode_reset",
+            Episode,
+            "Reads EpisodeParams, maps. Writes Episode, TruePose, physics, EpisodeStart.",
+            &[],
+            &["EpisodeStart"],
+        ),
         episode_reset,
     )
     .register::<OdometryParams, _, _>(
-        spec("odometry", Sense, "Reads TruePose, PreviousPose. Writes Odometry (noisy), PreviousPose.", &[], &["Odometry"]),
+        spec(
+            "odometry",
+            Sense,
+            "Reads TruePose, PreviousPose. Writes Odometry (noisy), PreviousPose.",
+            &[],
+            &["Odometry"],
+        ),
         odometry,
     )
     .register::<LidarParams, _, _>(
@@ -38,7 +52,13 @@ pub fn standard_registry() -> Registry {
         lidar,
     )
     .register::<LocalGridParams, _, _>(
-        spec("local_grid", Sense, "Reads LidarScan. Writes LocalGrid (0 occupied, 0.5 unknown, 1 free).", &["LidarScan"], &["LocalGrid"]),
+        spec(
+            "local_grid",
+            Sense,
+            "Reads LidarScan. Writes LocalGrid (0 occupied, 0.5 unknown, 1 free).",
+            &["LidarScan"],
+            &["LocalGrid"],
+        ),
         local_grid,
     )
     .register::<DepthParams, _, _>(
@@ -46,15 +66,33 @@ pub fn standard_registry() -> Registry {
         depth,
     )
     .register::<InitParams, _, _>(
-        spec("init_particles", Particles, "Reads TruePose, EpisodeStart, the map's layers. Writes ParticleSet.", &[], &["ParticleSet"]),
+        spec(
+            "init_particles",
+            Particles,
+            "Reads TruePose, the map's layers. Writes ParticleSet (fills empty sets).",
+            &[],
+            &["ParticleSet"],
+        ),
         init_particles,
     )
     .register::<TransitionParams, _, _>(
-        spec("transition", Particles, "Reads Odometry. Writes ParticleSet poses.", &["ParticleSet", "Odometry"], &[]),
+        spec(
+            "transition",
+            Particles,
+            "Reads Odometry. Writes ParticleSet poses.",
+            &["ParticleSet", "Odometry"],
+            &[],
+        ),
         transition,
     )
     .register::<LikelihoodFieldParams, _, _>(
-        spec("mcl_likelihood_field", Particles, "Reads LidarScan, the map's DistanceField. Writes ParticleSet weights.", &["ParticleSet", "LidarScan"], &[]),
+        spec(
+            "mcl_likelihood_field",
+            Particles,
+            "Reads LidarScan, the map's DistanceField. Writes ParticleSet weights.",
+            &["ParticleSet", "LidarScan"],
+            &[],
+        ),
         mcl_likelihood_field,
     )
     .register::<ResampleParams, _, _>(
@@ -62,11 +100,23 @@ pub fn standard_registry() -> Registry {
         resample,
     )
     .register::<NoParams, _, _>(
-        spec("estimate", Particles, "Reads ParticleSet. Writes PoseEstimate.", &["ParticleSet"], &["PoseEstimate"]),
+        spec(
+            "estimate",
+            Particles,
+            "Reads ParticleSet. Writes PoseEstimate.",
+            &["ParticleSet"],
+            &["PoseEstimate"],
+        ),
         estimate,
     )
     .register::<NoParams, _, _>(
-        spec("step_metrics", Evaluate, "Reads TruePose, PoseEstimate, Episode. Writes StepError, EpisodeLog, CompletedEpisodes.", &["PoseEstimate"], &["StepError"]),
+        spec(
+            "step_metrics",
+            Evaluate,
+            "Reads TruePose, PoseEstimate, Episode. Writes StepError, EpisodeLog, CompletedEpisodes.",
+            &["PoseEstimate"],
+            &["StepError"],
+        ),
         step_metrics,
     )
     .register::<NoParams, _, _>(
@@ -78,7 +128,13 @@ pub fn standard_registry() -> Registry {
         drive,
     )
     .register::<NoParams, _, _>(
-        spec("physics", Act, "Reads DriveCommand, the scene's PhysicsParams. Writes TruePose, Collided, MapPhysics.", &["DriveCommand"], &["TruePose", "Collided"]),
+        spec(
+            "physics",
+            Act,
+            "Reads DriveCommand, the scene's PhysicsParams. Writes TruePose, Collided, MapPhysics.",
+            &["DriveCommand"],
+            &["TruePose", "Collided"],
+        ),
         physics,
     );
     r

@@ -119,7 +119,9 @@ impl Registry {
             let params: P = erased_serde::deserialize(de)?;
             Ok(Box::new(WithParams { params, system, marker: PhantomData }) as Box<dyn ConfiguredSystem>)
         });
-        let defaults = Box::new(move || Box::new(WithParams { params: P::default(), system, marker: PhantomData }) as Box<_>);
+        let defaults = Box::new(move || {
+            Box::new(WithParams { params: P::default(), system, marker: PhantomData }) as Box<_>
+        });
         self.entries.push(RegisteredSystem {
             name: spec.name,
             stage: spec.stage,

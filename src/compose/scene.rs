@@ -8,8 +8,8 @@
 use crate::act::PhysicsParams;
 use crate::compose::error::ComposeError;
 use crate::episode::EpisodeParams;
-use crate::world::map::procedural::{ApartmentParams, Split, generate_apartment};
 use crate::world::map::load_ros_map;
+use crate::world::map::procedural::{ApartmentParams, Split, generate_apartment};
 use crate::world::{OccupancyMap, RobotParams};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -41,6 +41,11 @@ pub struct Scene {
 
 fn one() -> usize {
     1
+}
+
+/// True for finite numbers above zero (NaN is not).
+fn positive(x: f32) -> bool {
+    x.is_finite() && x > 0.0
 }
 
 /// Where the maps come from.
@@ -81,7 +86,8 @@ impl Scene {
     pub fn load(path: &Path) -> Result<LoadedScene, ComposeError> {
         let text = std::fs::read_to_string(path)
             .map_err(|source| ComposeError::Read { path: path.to_owned(), source })?;
-        let scene: Scene = ron::Options::default().from_str(&text).map_err(|e| ComposeError::from_ron(path, e))?;
+        let scene: Scene =
+            ron::Options::default().from_str(&text).map_err(|e| ComposeError::from_ron(path, e))?;
         scene.into_loaded(path)
     }
 
@@ -98,10 +104,10 @@ impl Scene {
         if self.episode.steps == 0 {
             return Err(invalid("episode.steps", "expected at least 1 step per episode"));
         }
-        if self.physics.substeps == 0 || !(self.physics.dt_s > 0.0) {
+        if self.physics.substeps == 0 || !positive(self.physics.dt_s) {
             return Err(invalid("physics", "expected substeps ≥ 1 and dt_s > 0"));
         }
-        if !(self.robot.radius_m > 0.0) {
+        if !positive(self.robot.radius_m) {
             return Err(invalid("robot.radius_m", "expected a positive radius in metres"));
         }
         let maps = match &self.maps {
@@ -120,7 +126,9 @@ impl Scene {
                     .iter()
                     .map(|p| {
                         let map = load_ros_map(&base.join(p)).map_err(|e| invalid("maps", &e.to_string()))?;
-                        let name = p.file_stem().map_or_else(|| p.display().to_string(), |s| s.to_string_lossy().into());
+                        let name = p
+                            .file_stem()
+                            .map_or_else(|| p.display().to_string(), |s| s.to_string_lossy().into());
                         Ok(NamedMap { name, map })
                     })
                     .collect::<Result<_, ComposeError>>()?

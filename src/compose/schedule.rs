@@ -43,8 +43,7 @@ impl Pipeline {
 
     /// Decodes schedule text; `path` only labels errors.
     pub fn parse(text: &str, path: &Path, registry: &Registry) -> Result<Pipeline, ComposeError> {
-        let mut de =
-            ron::Deserializer::from_str(text).map_err(|e| ComposeError::from_ron(path, e))?;
+        let mut de = ron::Deserializer::from_str(text).map_err(|e| ComposeError::from_ron(path, e))?;
         let steps = de
             .deserialize_struct("Schedule", &["steps"], ScheduleVisitor { registry })
             .and_then(|steps| de.end().map(|_| steps))
@@ -84,12 +83,18 @@ impl Pipeline {
             let entry = registry.get(step.name).expect("parsed steps are registered");
             for need in entry.needs {
                 if !produced.contains(need) {
-                    let providers: Vec<_> =
-                        registry.entries().iter().filter(|e| e.produces.contains(need)).map(|e| e.name).collect();
+                    let providers: Vec<_> = registry
+                        .entries()
+                        .iter()
+                        .filter(|e| e.produces.contains(need))
+                        .map(|e| e.name)
+                        .collect();
                     return Err(error(
                         index,
                         step.name,
-                        format!("needs {need}, which no earlier step produces; add one of {providers:?} before it"),
+                        format!(
+                            "needs {need}, which no earlier step produces; add one of {providers:?} before it"
+                        ),
                     ));
                 }
             }
@@ -187,9 +192,9 @@ impl<'de> Visitor<'de> for StepSeed<'_> {
                 self.0.names().join(", ")
             )));
         };
-        let system = seq
-            .next_element_seed(ParamsSeed(entry))?
-            .ok_or_else(|| de::Error::custom(format!("`{name}` needs its parameters: write `()` for defaults")))?;
+        let system = seq.next_element_seed(ParamsSeed(entry))?.ok_or_else(|| {
+            de::Error::custom(format!("`{name}` needs its parameters: write `()` for defaults"))
+        })?;
         Ok(PipelineStep { name: entry.name, stage: entry.stage, system })
     }
 }
@@ -258,7 +263,10 @@ mod tests {
         let m = message(r#"Schedule(steps: [("lidar", ()), ("transition", ())])"#);
         assert!(m.contains("needs ParticleSet") && m.contains("init_particles"), "{m}");
         let m = message(r#"Schedule(steps: [("init_particles", ()), ("mcl_likelihood_field", ())])"#);
-        assert!(m.contains("needs LidarScan") && m.contains("lidar"), "a likelihood needs a sensor first: {m}");
+        assert!(
+            m.contains("needs LidarScan") && m.contains("lidar"),
+            "a likelihood needs a sensor first: {m}"
+        );
     }
 
     #[test]

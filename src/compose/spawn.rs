@@ -7,10 +7,10 @@ use crate::compose::error::ComposeError;
 use crate::compose::scene::{LoadedScene, NamedMap};
 use crate::episode::{Episode, EpisodeLog, StepError};
 use crate::particles::{FilterHealth, ParticleSet, PoseEstimate};
+use crate::sense::{DepthStrip, LidarScan, LocalGrid, Odometry, RayGrid};
 use crate::world::map::{DistanceField, NetworkMap, TraversableMap};
 use crate::world::rng::stream;
 use crate::world::{EpisodeRng, OnMap, Pose2, PreviousPose, Robot, TruePose};
-use crate::sense::{DepthStrip, LidarScan, LocalGrid, Odometry, RayGrid};
 use bevy::prelude::*;
 
 /// Names a map entity, as results and trajectories refer to it.
@@ -32,11 +32,12 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
     world.insert_resource(scene.physics.clone());
     let mut robots = Vec::new();
     for (map_index, NamedMap { name, map }) in loaded.maps.iter().enumerate() {
-        let traversable = TraversableMap::build(map, scene.robot.radius_m).map_err(|e| ComposeError::Scene {
-            path: loaded.path.clone(),
-            field: "maps".into(),
-            message: format!("map `{name}`: {e}"),
-        })?;
+        let traversable =
+            TraversableMap::build(map, scene.robot.radius_m).map_err(|e| ComposeError::Scene {
+                path: loaded.path.clone(),
+                field: "maps".into(),
+                message: format!("map `{name}`: {e}"),
+            })?;
         let mut physics = MapPhysics::from_map(map, scene.physics.dt_s);
         let mut starts: Vec<Pose2> = Vec::new();
         let mut new_robots = Vec::new();

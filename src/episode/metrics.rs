@@ -67,7 +67,15 @@ pub struct CompletedEpisodes(pub Vec<EpisodeRecord>);
 pub fn step_metrics(
     params: Res<EpisodeParams>,
     mut completed: ResMut<CompletedEpisodes>,
-    mut robots: Query<(Entity, &TruePose, &PoseEstimate, &Episode, Option<&Collided>, &mut StepError, &mut EpisodeLog)>,
+    mut robots: Query<(
+        Entity,
+        &TruePose,
+        &PoseEstimate,
+        &Episode,
+        Option<&Collided>,
+        &mut StepError,
+        &mut EpisodeLog,
+    )>,
 ) {
     for (robot, truth, estimate, episode, collided, mut error, mut log) in &mut robots {
         *error = StepError::between(&estimate.pose, &truth.0);
@@ -80,7 +88,12 @@ pub fn step_metrics(
         log.errors.push(*error);
         if episode.step == params.steps {
             let errors = std::mem::take(&mut log.errors);
-            completed.0.push(EpisodeRecord { robot, episode: episode.index, errors, collisions: log.collisions });
+            completed.0.push(EpisodeRecord {
+                robot,
+                episode: episode.index,
+                errors,
+                collisions: log.collisions,
+            });
         }
     }
 }
@@ -111,9 +124,8 @@ pub fn summarize(records: &[EpisodeRecord]) -> Option<CellMetrics> {
     let n = steps.len() as f64;
     let mean = |f: &dyn Fn(&StepError) -> f32| steps.iter().map(|e| f(e) as f64).sum::<f64>() / n;
     let finals: Vec<&StepError> = records.iter().filter_map(|r| r.errors.last()).collect();
-    let final_mean = |f: &dyn Fn(&StepError) -> f32| {
-        finals.iter().map(|e| f(e) as f64).sum::<f64>() / finals.len() as f64
-    };
+    let final_mean =
+        |f: &dyn Fn(&StepError) -> f32| finals.iter().map(|e| f(e) as f64).sum::<f64>() / finals.len() as f64;
     let successes = records.iter().filter(|r| succeeded(&r.errors)).count();
     Some(CellMetrics {
         episodes: records.len(),
@@ -123,7 +135,8 @@ pub fn summarize(records: &[EpisodeRecord]) -> Option<CellMetrics> {
         mean_orient_err_rad: mean(&|e| e.orient_err_rad) as f32,
         final_orient_err_rad: final_mean(&|e| e.orient_err_rad) as f32,
         success_rate: successes as f32 / records.len() as f32,
-        collisions_per_episode: records.iter().map(|r| r.collisions as f32).sum::<f32>() / records.len() as f32,
+        collisions_per_episode: records.iter().map(|r| r.collisions as f32).sum::<f32>()
+            / records.len() as f32,
     })
 }
 
@@ -147,15 +160,29 @@ mod tests {
     fn step_error_wraps_heading_and_weights_it() {
         let e = StepError::between(&Pose2::new(3.0, 4.0, PI - 0.05), &Pose2::new(0.0, 0.0, -PI + 0.05));
         assert!((e.pos_err_m - 5.0).abs() < 1e-5);
-        assert!((e.orient_err_rad - 0.1).abs() < 1e-4, "across ±π the error is 0.1 rad, got {}", e.orient_err_rad);
+        assert!(
+            (e.orient_err_rad - 0.1).abs() < 1e-4,
+            "across ±π the error is 0.1 rad, got {}",
+            e.orient_err_rad
+        );
         assert!((e.loss - (25.0 + LOSS_BETA * 0.01)).abs() < 1e-3);
     }
 
     #[test]
     fn summarize_separates_mean_error_from_rmse() {
         let records = vec![
-            EpisodeRecord { robot: Entity::PLACEHOLDER, episode: 0, errors: vec![err(0.0), err(2.0)], collisions: 1 },
-            EpisodeRecord { robot: Entity::PLACEHOLDER, episode: 1, errors: vec![err(0.0), err(0.0)], collisions: 0 },
+            EpisodeRecord {
+                robot: Entity::PLACEHOLDER,
+                episode: 0,
+                errors: vec![err(0.0), err(2.0)],
+                collisions: 1,
+            },
+            EpisodeRecord {
+                robot: Entity::PLACEHOLDER,
+                episode: 1,
+                errors: vec![err(0.0), err(0.0)],
+                collisions: 0,
+            },
         ];
         let m = summarize(&records).unwrap();
         assert!((m.mean_pos_err_m - 0.5).abs() < 1e-6, "mean of 0, 2, 0, 0");

@@ -104,7 +104,11 @@ mod tests {
         world.run_system_once(episode_reset).unwrap();
         assert!(world.get::<EpisodeStart>(robot).is_none(), "step 2 continues the episode");
         world.run_system_once(episode_reset).unwrap();
-        assert_eq!(*world.get::<Episode>(robot).unwrap(), Episode { index: 1, step: 1 }, "after 2 steps a new one");
+        assert_eq!(
+            *world.get::<Episode>(robot).unwrap(),
+            Episode { index: 1, step: 1 },
+            "after 2 steps a new one"
+        );
         assert!(world.get::<EpisodeStart>(robot).is_some());
         assert!(world.get::<ParticleSet>(robot).unwrap().is_empty(), "the filter restarts with the episode");
         let pose = world.get::<TruePose>(robot).unwrap().0;

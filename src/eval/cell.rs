@@ -83,7 +83,11 @@ pub fn run_cell(
     let (localizer, policy) = labels(pipeline);
     let (mut app, _robots) = headless_app(scene, pipeline.clone())?;
     let world = app.world_mut();
-    let init = InitParams { task: cell.task, particles: eval.config.particles, ..world.resource::<InitParams>().clone() };
+    let init = InitParams {
+        task: cell.task,
+        particles: eval.config.particles,
+        ..world.resource::<InitParams>().clone()
+    };
     let particles = init.particle_count();
     world.insert_resource(init);
     world.init_resource::<CompletedEpisodes>();

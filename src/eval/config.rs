@@ -77,7 +77,9 @@ impl MapGroup {
         match self {
             MapGroup::Apartments { split: Split::Seen, .. } => "seen".into(),
             MapGroup::Apartments { split: Split::Unseen, .. } => "unseen".into(),
-            MapGroup::Ros { path } => path.file_stem().map_or("map".into(), |s| s.to_string_lossy().into_owned()),
+            MapGroup::Ros { path } => {
+                path.file_stem().map_or("map".into(), |s| s.to_string_lossy().into_owned())
+            }
         }
     }
 
@@ -95,9 +97,12 @@ impl MapGroup {
     /// Paths stay relative to the config file, which the scene resolves them against.
     fn map_source(&self) -> MapSource {
         match self {
-            MapGroup::Apartments { split, first, count } => {
-                MapSource::Procedural { split: *split, first: *first, count: *count, params: ApartmentParams::default() }
-            }
+            MapGroup::Apartments { split, first, count } => MapSource::Procedural {
+                split: *split,
+                first: *first,
+                count: *count,
+                params: ApartmentParams::default(),
+            },
             MapGroup::Ros { path } => MapSource::Ros { paths: vec![path.clone()] },
         }
     }
@@ -129,7 +134,11 @@ impl EvalConfig {
             field: field.to_owned(),
             message,
         };
-        for (field, empty) in [("schedules", self.schedules.is_empty()), ("tasks", self.tasks.is_empty()), ("maps", self.maps.is_empty())] {
+        for (field, empty) in [
+            ("schedules", self.schedules.is_empty()),
+            ("tasks", self.tasks.is_empty()),
+            ("maps", self.maps.is_empty()),
+        ] {
             if empty {
                 return Err(invalid(field, "expected at least one entry".into()));
             }
@@ -138,7 +147,10 @@ impl EvalConfig {
             return Err(invalid("episodes", "expected at least 1 episode per cell".into()));
         }
         if self.particles == Some(0) {
-            return Err(invalid("particles", "expected at least 1 particle (or leave it out for the task defaults)".into()));
+            return Err(invalid(
+                "particles",
+                "expected at least 1 particle (or leave it out for the task defaults)".into(),
+            ));
         }
         let base = path.parent().unwrap_or(Path::new("."));
         let registry = standard_registry();
@@ -149,7 +161,13 @@ impl EvalConfig {
                 let pipeline = Pipeline::load(&base.join(p), &registry)?;
                 for needed in ["init_particles", "estimate"] {
                     if !pipeline.names().contains(&needed) {
-                        return Err(invalid("schedules", format!("{} has no `{needed}` step: it localizes nothing to evaluate", p.display())));
+                        return Err(invalid(
+                            "schedules",
+                            format!(
+                                "{} has no `{needed}` step: it localizes nothing to evaluate",
+                                p.display()
+                            ),
+                        ));
                     }
                 }
                 Ok((p.clone(), pipeline))

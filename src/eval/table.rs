@@ -81,7 +81,10 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             for task in &tasks {
                 for split in &splits {
                     let cell = rows.iter().find(|r| {
-                        r.localizer == localizer && r.policy == policy && task_name(r.task) == task && &r.split == split
+                        r.localizer == localizer
+                            && r.policy == policy
+                            && task_name(r.task) == task
+                            && &r.split == split
                     });
                     text += &match cell {
                         Some(r) => format!(

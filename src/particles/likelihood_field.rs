@@ -298,6 +298,40 @@ mod tests {
     }
 
     #[test]
+    fn likelihood_matches_reference_formula() {
+        // Reference: per beam, DistanceField::distance_at on the world endpoint and the exact
+        // formula, on a map with a rotated origin; the kernel may differ only by its table step.
+        let params = LikelihoodFieldParams { max_beams: 40, ..Default::default() };
+        let mut map = tiny_room();
+        map.origin = Pose2::new(-1.0, 0.5, -0.4);
+        let field = DistanceField::build(&map);
+        let truth = map.origin.compose(&Pose2::new(0.6, 0.6, 0.3));
+        let mut scan = marched_scan(&map, truth);
+        scan.ranges_m[100] = f32::NAN;
+        let particles = [truth, map.origin.compose(&Pose2::new(1.2, 0.4, -2.0)), Pose2::new(30.0, 0.0, 0.0)];
+        let mut set = ParticleSet::from_poses(&particles);
+        set.log_w = vec![0.0; 3];
+        add_log_likelihoods(&mut set, &scan, &field, &map.origin, &params).expect("valid field");
+        for (k, p) in particles.iter().enumerate() {
+            let expected: f32 = beam_indices(scan.ranges_m.len(), params.max_beams)
+                .into_iter()
+                .filter(|&i| scan.ranges_m[i].is_finite() && scan.ranges_m[i] < scan.range_max_m)
+                .map(|i| {
+                    let r = scan.ranges_m[i];
+                    let a = p.yaw + scan.angle_min_rad + i as f32 * scan.angle_increment_rad;
+                    let d = field.distance_at(&map, p.x + r * a.cos(), p.y + r * a.sin()).min(2.0);
+                    (0.5 * (-d * d / (2.0 * 0.04)).exp() + 0.5 / scan.range_max_m).ln()
+                })
+                .sum();
+            assert!(
+                (set.log_w[k] - expected).abs() < 0.05,
+                "particle {k}: kernel {} vs reference {expected}",
+                set.log_w[k]
+            );
+        }
+    }
+
+    #[test]
     fn likelihood_rejects_short_field() {
         let map = tiny_room();
         let mut field = brute_field(&map);
