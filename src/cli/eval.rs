@@ -34,7 +34,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let started = Instant::now();
     let rows = cells
         .par_iter()
-        .map(|cell| run_cell(&eval, cell, || bar.inc(1)).map(|(row, _)| row))
+        .map(|cell| run_cell(&eval, cell, || bar.inc(1)).map(|outcome| outcome.row))
         .collect::<Result<Vec<ResultRow>, _>>()?;
     bar.finish_and_clear();
     write_results(&args.out, &rows)?;

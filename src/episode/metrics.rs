@@ -8,8 +8,8 @@
 
 use crate::act::Collided;
 use crate::episode::reset::{Episode, EpisodeParams};
-use crate::particles::PoseEstimate;
-use crate::world::{Pose2, TruePose, angle_error, wrap_angle};
+use crate::particles::{ParticleSet, PoseEstimate};
+use crate::world::{OnMap, Pose2, TruePose, angle_error, wrap_angle};
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -40,60 +40,68 @@ impl StepError {
     }
 }
 
-/// The errors of the robot's current episode so far.
+/// What a robot's current episode has logged so far; moved into an `EpisodeRecord` when it ends.
 #[derive(Component, Clone, Debug, Default, PartialEq)]
 pub struct EpisodeLog {
     pub errors: Vec<StepError>,
+    /// True and estimated pose at each step (what figures draw).
+    pub truth: Vec<Pose2>,
+    pub estimates: Vec<Pose2>,
+    /// Positions of up to `FIGURE_PARTICLES` particles after the episode's first filter update.
+    pub first_particles: Vec<(f32, f32)>,
     /// Collisions seen at this episode's steps 2…T, i.e. caused by its first T − 1 actions
     /// (the last action's outcome is only seen after the episode ends).
     pub collisions: u32,
 }
 
-/// One finished episode, as the evaluation harness aggregates it.
+/// Particles kept per episode for figures; a stride subsample of larger sets.
+pub const FIGURE_PARTICLES: usize = 1000;
+
+/// One finished episode, as the evaluation harness aggregates and draws it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EpisodeRecord {
     pub robot: Entity,
+    pub map: Entity,
     pub episode: u32,
-    pub errors: Vec<StepError>,
-    pub collisions: u32,
+    pub log: EpisodeLog,
 }
 
 /// Episodes finished so far in this world, in completion order.
 #[derive(Resource, Clone, Debug, Default)]
 pub struct CompletedEpisodes(pub Vec<EpisodeRecord>);
 
-/// Reads TruePose, PoseEstimate, Episode, EpisodeParams, Collided. Writes StepError, EpisodeLog,
-/// CompletedEpisodes (when an episode's last step is logged).
+/// Reads TruePose, PoseEstimate, Episode, EpisodeParams, Collided, ParticleSet. Writes StepError,
+/// EpisodeLog, CompletedEpisodes (when an episode's last step is logged).
 pub fn step_metrics(
     params: Res<EpisodeParams>,
     mut completed: ResMut<CompletedEpisodes>,
     mut robots: Query<(
         Entity,
-        &TruePose,
-        &PoseEstimate,
-        &Episode,
-        Option<&Collided>,
+        &OnMap,
+        (&TruePose, &PoseEstimate, &Episode),
+        (Option<&Collided>, Option<&ParticleSet>),
         &mut StepError,
         &mut EpisodeLog,
     )>,
 ) {
-    for (robot, truth, estimate, episode, collided, mut error, mut log) in &mut robots {
+    for (robot, on_map, (truth, estimate, episode), (collided, particles), mut error, mut log) in &mut robots
+    {
         *error = StepError::between(&estimate.pose, &truth.0);
         if episode.step == 1 {
-            log.errors.clear();
-            log.collisions = 0;
+            *log = EpisodeLog::default();
+            if let Some(set) = particles {
+                let stride = set.len().div_ceil(FIGURE_PARTICLES).max(1);
+                log.first_particles = (0..set.len()).step_by(stride).map(|k| (set.x[k], set.y[k])).collect();
+            }
         } else if collided.is_some_and(|c| c.0) {
             log.collisions += 1;
         }
         log.errors.push(*error);
+        log.truth.push(truth.0);
+        log.estimates.push(estimate.pose);
         if episode.step == params.steps {
-            let errors = std::mem::take(&mut log.errors);
-            completed.0.push(EpisodeRecord {
-                robot,
-                episode: episode.index,
-                errors,
-                collisions: log.collisions,
-            });
+            let log = std::mem::take(&mut *log);
+            completed.0.push(EpisodeRecord { robot, map: on_map.0, episode: episode.index, log });
         }
     }
 }
@@ -117,16 +125,16 @@ pub struct CellMetrics {
 
 /// Aggregates finished episodes; `None` when there are none.
 pub fn summarize(records: &[EpisodeRecord]) -> Option<CellMetrics> {
-    let steps: Vec<&StepError> = records.iter().flat_map(|r| &r.errors).collect();
+    let steps: Vec<&StepError> = records.iter().flat_map(|r| &r.log.errors).collect();
     if steps.is_empty() {
         return None;
     }
     let n = steps.len() as f64;
     let mean = |f: &dyn Fn(&StepError) -> f32| steps.iter().map(|e| f(e) as f64).sum::<f64>() / n;
-    let finals: Vec<&StepError> = records.iter().filter_map(|r| r.errors.last()).collect();
+    let finals: Vec<&StepError> = records.iter().filter_map(|r| r.log.errors.last()).collect();
     let final_mean =
         |f: &dyn Fn(&StepError) -> f32| finals.iter().map(|e| f(e) as f64).sum::<f64>() / finals.len() as f64;
-    let successes = records.iter().filter(|r| succeeded(&r.errors)).count();
+    let successes = records.iter().filter(|r| succeeded(&r.log.errors)).count();
     Some(CellMetrics {
         episodes: records.len(),
         mean_pos_err_m: mean(&|e| e.pos_err_m) as f32,
@@ -135,7 +143,7 @@ pub fn summarize(records: &[EpisodeRecord]) -> Option<CellMetrics> {
         mean_orient_err_rad: mean(&|e| e.orient_err_rad) as f32,
         final_orient_err_rad: final_mean(&|e| e.orient_err_rad) as f32,
         success_rate: successes as f32 / records.len() as f32,
-        collisions_per_episode: records.iter().map(|r| r.collisions as f32).sum::<f32>()
+        collisions_per_episode: records.iter().map(|r| r.log.collisions as f32).sum::<f32>()
             / records.len() as f32,
     })
 }
@@ -170,20 +178,13 @@ mod tests {
 
     #[test]
     fn summarize_separates_mean_error_from_rmse() {
-        let records = vec![
-            EpisodeRecord {
-                robot: Entity::PLACEHOLDER,
-                episode: 0,
-                errors: vec![err(0.0), err(2.0)],
-                collisions: 1,
-            },
-            EpisodeRecord {
-                robot: Entity::PLACEHOLDER,
-                episode: 1,
-                errors: vec![err(0.0), err(0.0)],
-                collisions: 0,
-            },
-        ];
+        let record = |errors: Vec<StepError>, collisions| EpisodeRecord {
+            robot: Entity::PLACEHOLDER,
+            map: Entity::PLACEHOLDER,
+            episode: 0,
+            log: EpisodeLog { errors, collisions, ..default() },
+        };
+        let records = vec![record(vec![err(0.0), err(2.0)], 1), record(vec![err(0.0), err(0.0)], 0)];
         let m = summarize(&records).unwrap();
         assert!((m.mean_pos_err_m - 0.5).abs() < 1e-6, "mean of 0, 2, 0, 0");
         assert!((m.rmse_pos_m - 1.0).abs() < 1e-6, "√(4/4)");
@@ -210,6 +211,8 @@ mod tests {
         let truth = Pose2::new(1.0, 1.0, 0.0);
         let robot = world
             .spawn((
+                OnMap(Entity::PLACEHOLDER),
+                ParticleSet::from_poses(&[truth; 3]),
                 TruePose(truth),
                 PoseEstimate { pose: Pose2::new(1.3, 1.4, 0.0), ..default() },
                 Episode { index: 0, step: 1 },
@@ -224,6 +227,8 @@ mod tests {
         world.run_system_once(step_metrics).unwrap();
         let done = &world.resource::<CompletedEpisodes>().0;
         assert_eq!(done.len(), 1, "the last step completes the episode");
-        assert_eq!(done[0].errors.len(), 2);
+        assert_eq!(done[0].log.errors.len(), 2);
+        assert_eq!(done[0].log.truth, vec![truth; 2], "truth is logged per step for figures");
+        assert_eq!(done[0].log.first_particles.len(), 3, "the first step's particles are kept");
     }
 }

@@ -5,7 +5,7 @@ mod metrics;
 mod reset;
 
 pub use metrics::{
-    CellMetrics, CompletedEpisodes, EpisodeLog, EpisodeRecord, LOSS_BETA, SUCCESS_RADIUS_M, StepError,
-    step_metrics, succeeded, summarize,
+    CellMetrics, CompletedEpisodes, EpisodeLog, EpisodeRecord, FIGURE_PARTICLES, LOSS_BETA, SUCCESS_RADIUS_M,
+    StepError, step_metrics, succeeded, summarize,
 };
 pub use reset::{Episode, EpisodeParams, EpisodeStart, episode_reset};

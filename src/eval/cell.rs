@@ -6,7 +6,10 @@ use crate::episode::{CompletedEpisodes, EpisodeRecord, summarize};
 use crate::eval::config::LoadedEval;
 use crate::particles::{InitParams, Task};
 use crate::plugin::{ApfnSet, headless_app};
+use crate::world::OccupancyMap;
+use bevy::prelude::Entity;
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 
 /// Which schedule, task and map group a cell crosses (indices into the loaded config).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -71,13 +74,16 @@ pub fn labels(pipeline: &Pipeline) -> (String, String) {
     (localizer, policy)
 }
 
-/// Runs one cell and returns its row and the episodes behind it. `on_step` is called after
-/// every agent step (for progress bars).
-pub fn run_cell(
-    eval: &LoadedEval,
-    cell: &CellSpec,
-    on_step: impl Fn(),
-) -> Result<(ResultRow, Vec<EpisodeRecord>), ComposeError> {
+/// A finished cell: its table row, the episodes behind it, and the maps they ran on (by entity,
+/// as `EpisodeRecord::map` names them) for figures.
+pub struct CellOutcome {
+    pub row: ResultRow,
+    pub records: Vec<EpisodeRecord>,
+    pub maps: HashMap<Entity, OccupancyMap>,
+}
+
+/// Runs one cell. `on_step` is called after every agent step (for progress bars).
+pub fn run_cell(eval: &LoadedEval, cell: &CellSpec, on_step: impl Fn()) -> Result<CellOutcome, ComposeError> {
     let (schedule_path, pipeline) = &eval.schedules[cell.schedule];
     let scene = &eval.scenes[cell.group];
     let (localizer, policy) = labels(pipeline);
@@ -95,7 +101,9 @@ pub fn run_cell(
         app.update();
         on_step();
     }
-    let mut records = std::mem::take(&mut app.world_mut().resource_mut::<CompletedEpisodes>().0);
+    let world = app.world_mut();
+    let mut records = std::mem::take(&mut world.resource_mut::<CompletedEpisodes>().0);
+    let maps = world.query::<(Entity, &OccupancyMap)>().iter(world).map(|(e, m)| (e, m.clone())).collect();
     records.truncate(eval.config.episodes);
     let m = summarize(&records).ok_or_else(|| ComposeError::Step {
         path: schedule_path.clone(),
@@ -120,5 +128,5 @@ pub fn run_cell(
         final_orient_err_rad: m.final_orient_err_rad,
         success_rate: m.success_rate,
     };
-    Ok((row, records))
+    Ok(CellOutcome { row, records, maps })
 }
