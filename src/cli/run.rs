@@ -4,7 +4,7 @@
 use crate::act::Collided;
 use crate::agent::Action;
 use crate::cli::set_threads;
-use crate::compose::{LoadedScene, MapName, Pipeline, Scene, standard_registry};
+use crate::compose::{ComposeError, LoadedScene, MapName, Pipeline, Scene, standard_registry};
 use crate::episode::Episode;
 use crate::particles::PoseEstimate;
 use crate::plugin::headless_app;
@@ -13,9 +13,10 @@ use crate::world::{OnMap, TruePose};
 use anyhow::Context;
 use bevy::prelude::*;
 use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// The scene `apfn run` uses when none is given: procedural apartments (no files needed).
 pub const DEFAULT_SCENE: (&str, &str) = ("scenes/apartment.ron", include_str!("../../scenes/apartment.ron"));
@@ -37,6 +38,9 @@ pub struct RunArgs {
     /// Folder for trajectories.jsonl and run.json (created if missing).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Independent copies of the scene (seeds seed, seed+1, …), run in parallel on rayon threads.
+    #[arg(long, default_value_t = 1)]
+    pub worlds: u64,
     /// Worker threads (default: all cores); results do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
@@ -45,6 +49,7 @@ pub struct RunArgs {
 /// One robot at one step, as written to trajectories.jsonl.
 #[derive(Serialize, Debug, Clone, PartialEq)]
 pub struct TrajectoryRow {
+    pub world: u64,
     pub step: u64,
     pub robot: usize,
     pub map: String,
@@ -65,7 +70,9 @@ pub struct RunSummary {
     pub scene: String,
     pub systems: String,
     pub systems_in_order: Vec<&'static str>,
+    pub worlds: u64,
     pub maps: usize,
+    /// Robots per world.
     pub robots: usize,
     pub steps: u64,
     pub threads: usize,
@@ -76,43 +83,44 @@ pub struct RunSummary {
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     set_threads(args.threads)?;
+    anyhow::ensure!(args.worlds > 0, "--worlds: expected at least 1 world");
     let loaded = load_scene(args.scene.as_deref())?;
     let pipeline = load_pipeline(args.systems.as_deref(), &loaded)?;
-    let systems_label = pipeline.source.display().to_string();
-    let systems_in_order = pipeline.names();
-    let (mut app, robots) = headless_app(&loaded, pipeline)?;
+    let robots_per_world = loaded.maps.len() * loaded.scene.robots_per_map;
 
-    let bar = ProgressBar::new(args.steps).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {per_sec}, eta {eta}")
+    let bar = ProgressBar::new(args.steps * args.worlds).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} world-steps, {per_sec}, eta {eta}")
             .expect("static progress template"),
     );
-    let mut rows = Vec::new();
-    let mut simulated = Duration::ZERO;
-    for step in 0..args.steps {
-        let started = Instant::now();
-        app.update();
-        simulated += started.elapsed();
-        rows.extend(snapshot(app.world_mut(), &robots, step));
-        bar.inc(1);
-    }
+    let started = Instant::now();
+    let worlds = (0..args.worlds)
+        .into_par_iter()
+        .map(|world| {
+            let mut copy = loaded.clone();
+            copy.scene.seed += world;
+            simulate(&copy, pipeline.clone(), world, args.steps, || bar.inc(1))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     bar.finish_and_clear();
+    let seconds = started.elapsed().as_secs_f64();
 
-    let seconds = simulated.as_secs_f64();
     let summary = RunSummary {
         scene: loaded.path.display().to_string(),
-        systems: systems_label,
-        systems_in_order,
+        systems: pipeline.source.display().to_string(),
+        systems_in_order: pipeline.names(),
+        worlds: args.worlds,
         maps: loaded.maps.len(),
-        robots: robots.len(),
+        robots: robots_per_world,
         steps: args.steps,
         threads: rayon::current_num_threads(),
         seconds,
-        steps_per_s: args.steps as f64 / seconds,
-        robot_steps_per_s: (args.steps as usize * robots.len()) as f64 / seconds,
+        steps_per_s: (args.steps * args.worlds) as f64 / seconds,
+        robot_steps_per_s: (args.steps * args.worlds) as f64 * robots_per_world as f64 / seconds,
     };
     println!(
-        "{} steps × {} robots on {} maps in {:.2} s: {:.1} steps/s, {:.0} robot-steps/s ({} threads)",
+        "{} steps × {} worlds × {} robots ({} maps each) in {:.2} s: {:.1} world-steps/s, {:.0} robot-steps/s ({} threads)",
         summary.steps,
+        summary.worlds,
         summary.robots,
         summary.maps,
         seconds,
@@ -121,10 +129,29 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         summary.threads
     );
     if let Some(out) = &args.out {
+        let rows: Vec<TrajectoryRow> = worlds.into_iter().flatten().collect();
         write_outputs(out, &rows, &summary)?;
         println!("wrote {}/trajectories.jsonl and run.json", out.display());
     }
     Ok(())
+}
+
+/// Runs one independent world for `steps` agent steps and returns every robot's rows.
+fn simulate(
+    scene: &LoadedScene,
+    pipeline: Pipeline,
+    world: u64,
+    steps: u64,
+    on_step: impl Fn(),
+) -> Result<Vec<TrajectoryRow>, ComposeError> {
+    let (mut app, robots) = headless_app(scene, pipeline)?;
+    let mut rows = Vec::new();
+    for step in 0..steps {
+        app.update();
+        rows.extend(snapshot(app.world_mut(), &robots, world, step));
+        on_step();
+    }
+    Ok(rows)
 }
 
 /// The scene from `path`, or the embedded default.
@@ -153,7 +180,7 @@ pub fn load_pipeline(path: Option<&Path>, scene: &LoadedScene) -> anyhow::Result
 }
 
 /// Every robot's row for this step.
-fn snapshot(world: &mut World, robots: &[Entity], step: u64) -> Vec<TrajectoryRow> {
+fn snapshot(world: &mut World, robots: &[Entity], world_index: u64, step: u64) -> Vec<TrajectoryRow> {
     robots
         .iter()
         .enumerate()
@@ -164,6 +191,7 @@ fn snapshot(world: &mut World, robots: &[Entity], step: u64) -> Vec<TrajectoryRo
             let episode = entity.get::<Episode>().copied().unwrap_or_default();
             let action = entity.get::<Action>().copied().unwrap_or_default();
             Some(TrajectoryRow {
+                world: world_index,
                 step,
                 robot: index,
                 map: map.unwrap_or_default(),

@@ -49,8 +49,10 @@ pub fn depth_strip(grid: &RayGrid, pose: Pose2, params: &DepthParams, out: &mut 
     for (c, d) in out.iter_mut().enumerate() {
         let a = column_angle(params, c);
         let cos = a.cos();
-        let range = grid.cast(pose.x, pose.y, pose.yaw + a, params.max_m / cos);
-        *d = (range * cos).clamp(params.min_m, params.max_m.max(params.min_m));
+        let limit = params.max_m / cos;
+        let range = grid.cast(pose.x, pose.y, pose.yaw + a, limit);
+        let depth = if range >= limit { params.max_m } else { range * cos };
+        *d = depth.clamp(params.min_m, params.max_m.max(params.min_m));
     }
 }
 
