@@ -1,13 +1,15 @@
 //! Ray casting throughput (rays/s): the accelerated grid caster against the plain DDA, on the
-//! real nav2 depot map and on a synthetic apartment. Fans of 228 rays (the paper's LiDAR) from
+//! real nav2 depot map and on procedural apartment 0. Fans of 228 rays (the paper's LiDAR) from
 //! seeded random free poses, single-threaded and as a rayon batch of 64 robots.
 //!
 //! `cargo bench --bench raycast -- --warm-up-time 1 --measurement-time 3`
 
 use apfn::sense::{RayGrid, cast_reference};
-use apfn::world::{Cell, OccupancyMap, Pose2};
+use apfn::world::map::procedural::{ApartmentParams, generate_apartment};
+use apfn::world::map::{TraversableMap, load_ros_map};
+use apfn::world::{OccupancyMap, Pose2, RobotParams};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
 use std::f32::consts::PI;
@@ -20,92 +22,18 @@ const MAX_RANGE_M: f32 = 5.6;
 const POSES: usize = 256;
 const BATCH: usize = 64;
 
-/// The depot map read straight from its PGM (trinary, 0.05 m, occupied > 0.65, free < 0.25).
+/// The nav2 depot, loaded as users load it; `None` (with a message) when ../shared is absent.
 fn depot() -> Option<OccupancyMap> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/maps/nav2_depot.pgm");
-    let img = match image::open(&path) {
-        Ok(img) => img.to_luma8(),
-        Err(e) => {
-            eprintln!("raycast/depot skipped: cannot read {} ({e})", path.display());
-            return None;
-        }
-    };
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let mut map = OccupancyMap::filled(w, h, 0.05, Cell::Unknown);
-    for (col, row, px) in img.enumerate_pixels() {
-        let occ = (255.0 - f32::from(px.0[0])) / 255.0;
-        let cell = if occ > 0.65 {
-            Cell::Occupied
-        } else if occ < 0.25 {
-            Cell::Free
-        } else {
-            Cell::Unknown
-        };
-        map.set(col as usize, h - 1 - row as usize, cell);
-    }
-    Some(map)
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/maps/nav2_depot.yaml");
+    load_ros_map(&path).inspect_err(|e| eprintln!("raycast/depot skipped: {e}")).ok()
 }
 
-/// A 12 m × 10 m apartment at 0.05 m: outer walls, four rooms and a corridor with doors,
-/// furniture blocks, an unknown closet.
-fn apartment() -> OccupancyMap {
-    let (w, h) = (240, 200);
-    let mut map = OccupancyMap::filled(w, h, 0.05, Cell::Free);
-    let mut rect = |i0: usize, j0: usize, i1: usize, j1: usize, cell: Cell| {
-        for j in j0..j1 {
-            for i in i0..i1 {
-                map.set(i, j, cell);
-            }
-        }
-    };
-    use Cell::{Occupied as O, Unknown as U};
-    rect(0, 0, w, 3, O);
-    rect(0, h - 3, w, h, O);
-    rect(0, 0, 3, h, O);
-    rect(w - 3, 0, w, h, O);
-    // Corridor along y ∈ [4.5, 5.5] m between two rows of rooms, doors 0.9 m wide.
-    rect(3, 88, 40, 91, O);
-    rect(58, 88, 150, 91, O);
-    rect(168, 88, w - 3, 91, O);
-    rect(3, 110, 60, 113, O);
-    rect(78, 110, 180, 113, O);
-    rect(198, 110, w - 3, 113, O);
-    // Room dividers with doors near the corridor.
-    rect(100, 3, 103, 70, O);
-    rect(170, 3, 173, 70, O);
-    rect(120, 130, 123, h - 3, O);
-    // Furniture: a table, a sofa, a bed, a kitchen counter; an unmapped closet.
-    rect(40, 30, 64, 46, O);
-    rect(130, 20, 160, 30, O);
-    rect(20, 150, 70, 185, O);
-    rect(140, 180, 230, 196, O);
-    rect(200, 20, 235, 50, U);
-    map
-}
-
-/// Seeded poses on free cells at least `margin` cells from anything non-free.
+/// Seeded poses where a robot may stand (the traversable map), as the LiDAR sees them.
 fn free_poses(map: &OccupancyMap, n: usize, seed: u64) -> Vec<Pose2> {
-    let margin = 4i64;
+    let traversable =
+        TraversableMap::build(map, RobotParams::default().radius_m).expect("bench maps have free space");
     let mut rng = Pcg64Mcg::seed_from_u64(seed);
-    let mut poses = Vec::with_capacity(n);
-    while poses.len() < n {
-        let (i, j) = (rng.random_range(0..map.width) as i64, rng.random_range(0..map.height) as i64);
-        let clear = (-margin..=margin).all(|dj| {
-            (-margin..=margin).all(|di| {
-                let (a, b) = (i + di, j + dj);
-                a >= 0
-                    && b >= 0
-                    && (a as usize) < map.width
-                    && (b as usize) < map.height
-                    && map.get(a as usize, b as usize) == Cell::Free
-            })
-        });
-        if clear {
-            let (x, y) = map.cell_center(i as usize, j as usize);
-            poses.push(Pose2::new(x, y, rng.random_range(-PI..PI)));
-        }
-    }
-    poses
+    (0..n).map(|_| traversable.sample_pose(map, &mut rng)).collect()
 }
 
 fn bench_map(c: &mut Criterion, name: &str, map: &OccupancyMap) {
@@ -161,7 +89,7 @@ fn bench_map(c: &mut Criterion, name: &str, map: &OccupancyMap) {
 }
 
 fn raycast(c: &mut Criterion) {
-    bench_map(c, "apartment", &apartment());
+    bench_map(c, "apartment", &generate_apartment(0, &ApartmentParams::default()));
     if let Some(map) = depot() {
         bench_map(c, "depot", &map);
     }
