@@ -82,13 +82,22 @@ pub fn inspect(path: &Path) -> anyhow::Result<serde_json::Value> {
     Ok(serde_json::json!({
         "width": map.width,
         "height": map.height,
-        "resolution": map.resolution_m,
-        "origin": [o.x, o.y, o.yaw],
-        "free_fraction": free as f64 / n,
-        "occupied_fraction": occupied as f64 / n,
-        "unknown_fraction": unknown as f64 / n,
-        "traversable_area_m2": area,
+        "resolution": shortest(map.resolution_m),
+        "origin": [shortest(o.x), shortest(o.y), shortest(o.yaw)],
+        "free_fraction": round6(free as f64 / n),
+        "occupied_fraction": round6(occupied as f64 / n),
+        "unknown_fraction": round6(unknown as f64 / n),
+        "traversable_area_m2": round6(area as f64),
     }))
+}
+
+/// The f32 as the shortest decimal that reads back to it (0.05, not 0.05000000074505806).
+fn shortest(x: f32) -> f64 {
+    x.to_string().parse().unwrap_or(x as f64)
+}
+
+fn round6(x: f64) -> f64 {
+    (x * 1e6).round() / 1e6
 }
 
 /// One pixel per cell, image row 0 = the map's top row.
