@@ -1,7 +1,9 @@
 //! The `apfn` command line: one file per subcommand; `main.rs` only parses and dispatches.
 
 pub mod eval;
+pub mod localize;
 pub mod map;
+pub mod record;
 pub mod run;
 pub mod systems;
 
@@ -24,6 +26,10 @@ pub enum Command {
     Run(run::RunArgs),
     /// Evaluate localizers × policies × tasks × maps and write the paper-style tables.
     Eval(eval::EvalArgs),
+    /// Simulate a scene and write one robot's odometry + LiDAR as a JSON Lines log for replay.
+    Record(record::RecordArgs),
+    /// Run the particle filter on a recorded log and a ROS map; write one estimate per line.
+    Localize(localize::LocalizeArgs),
     /// List the registered systems with their parameters.
     #[command(subcommand)]
     Systems(systems::SystemsCommand),
@@ -35,6 +41,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Map(cmd) => map::run(cmd),
         Command::Run(args) => run::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Record(args) => record::run(args),
+        Command::Localize(args) => localize::run(args),
         Command::Systems(cmd) => systems::run(cmd),
     }
 }
