@@ -4,10 +4,10 @@
 use crate::act::{drive, physics};
 use crate::agent::random_policy;
 use crate::compose::registry::{NoParams, Registry, SystemSpec};
-use crate::episode::{episode_reset, step_metrics};
+use crate::episode::{KidnapParams, episode_reset, kidnap, step_metrics};
 use crate::particles::{
-    InitParams, LikelihoodFieldParams, ResampleParams, TransitionParams, estimate, init_particles,
-    mcl_likelihood_field, resample, transition,
+    InitParams, LikelihoodFieldParams, RecoveryParams, ResampleParams, TransitionParams, augmented_recovery,
+    estimate, init_particles, mcl_likelihood_field, resample, transition,
 };
 use crate::plugin::ApfnSet::{self, *};
 use crate::sense::{
@@ -36,6 +36,16 @@ pub fn standard_registry() -> Registry {
             &["EpisodeStart"],
         ),
         episode_reset,
+    )
+    .register::<KidnapParams, _, _>(
+        spec(
+            "kidnap",
+            Episode,
+            "Reads Episode, the map's layers. Writes TruePose, PreviousPose (carried along), physics.",
+            &[],
+            &[],
+        ),
+        kidnap,
     )
     .register::<OdometryParams, _, _>(
         spec(
@@ -89,11 +99,21 @@ pub fn standard_registry() -> Registry {
         spec(
             "mcl_likelihood_field",
             Particles,
-            "Reads LidarScan, the map's DistanceField. Writes ParticleSet weights.",
+            "Reads LidarScan, the map's DistanceField. Writes ParticleSet weights, LikelihoodStats.",
             &["ParticleSet", "LidarScan"],
-            &[],
+            &["LikelihoodStats"],
         ),
         mcl_likelihood_field,
+    )
+    .register::<RecoveryParams, _, _>(
+        spec(
+            "augmented_recovery",
+            Particles,
+            "Reads LikelihoodStats, LidarScan, the map's layers. Writes ParticleSet (uniform injections).",
+            &["ParticleSet", "LidarScan", "LikelihoodStats"],
+            &[],
+        ),
+        augmented_recovery,
     )
     .register::<ResampleParams, _, _>(
         spec("resample", Particles, "Reads ParticleSet weights. Writes ParticleSet.", &["ParticleSet"], &[]),

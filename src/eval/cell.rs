@@ -74,6 +74,20 @@ pub fn labels(pipeline: &Pipeline) -> (String, String) {
     (localizer, policy)
 }
 
+/// The table labels of the config's `index`-th schedule: [`labels`], with the schedule's file
+/// stem appended to the policy when another schedule of the config has the same labels (an
+/// ablation that changes a parameter or a filter step), e.g. `random (resample_none)`.
+pub fn schedule_labels(eval: &LoadedEval, index: usize) -> (String, String) {
+    let (path, pipeline) = &eval.schedules[index];
+    let (localizer, policy) = labels(pipeline);
+    let clash = (eval.schedules.iter().enumerate())
+        .any(|(other, (_, p))| other != index && labels(p) == (localizer.clone(), policy.clone()));
+    match (clash, path.file_stem()) {
+        (true, Some(stem)) => (localizer, format!("{policy} ({})", stem.to_string_lossy())),
+        _ => (localizer, policy),
+    }
+}
+
 /// A finished cell: its table row, the episodes behind it, and the maps they ran on (by entity,
 /// as `EpisodeRecord::map` names them) for figures.
 pub struct CellOutcome {
@@ -86,7 +100,7 @@ pub struct CellOutcome {
 pub fn run_cell(eval: &LoadedEval, cell: &CellSpec, on_step: impl Fn()) -> Result<CellOutcome, ComposeError> {
     let (schedule_path, pipeline) = &eval.schedules[cell.schedule];
     let scene = &eval.scenes[cell.group];
-    let (localizer, policy) = labels(pipeline);
+    let (localizer, policy) = schedule_labels(eval, cell.schedule);
     let (mut app, _robots) = headless_app(scene, pipeline.clone())?;
     let world = app.world_mut();
     let init = InitParams {

@@ -5,6 +5,6 @@ mod cell;
 mod config;
 mod table;
 
-pub use cell::{CellOutcome, CellSpec, ResultRow, cell_steps, cells, labels, run_cell};
+pub use cell::{CellOutcome, CellSpec, ResultRow, cell_steps, cells, labels, run_cell, schedule_labels};
 pub use config::{EvalConfig, LoadedEval, MapGroup};
 pub use table::{csv, markdown, task_name, write_results};

@@ -8,7 +8,7 @@
 //! Σ log p is sharper, so keep `max_beams` moderate (nav2's 60) or lower `z_hit` if particles
 //! starve. The LiDAR is taken to sit at the robot centre, facing ahead.
 
-use crate::particles::set::{FilterHealth, Guard, ParticleError, ParticleSet};
+use crate::particles::set::{FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet};
 use crate::sense::LidarScan;
 use crate::world::map::DistanceField;
 use crate::world::{OccupancyMap, OnMap, Pose2};
@@ -145,36 +145,42 @@ pub fn add_log_likelihoods(
 }
 
 /// The full observation update: adds the log-likelihoods, then normalises through the guard
-/// (NaN particles dropped; if nothing usable is left, weights become uniform).
+/// (NaN particles dropped; if nothing usable is left, weights become uniform). Also returns
+/// log Σ_k w_k·p(z | x_k), the log of the weighted mean likelihood before normalisation (what
+/// augmented MCL averages); −∞ for an empty set or when every likelihood is 0.
 pub fn weigh_likelihood_field(
     set: &mut ParticleSet,
     scan: &LidarScan,
     field: &DistanceField,
     origin: &Pose2,
     params: &LikelihoodFieldParams,
-) -> Result<Guard, ParticleError> {
+) -> Result<(Guard, f32), ParticleError> {
     if set.is_empty() {
-        return Ok(Guard::Clean);
+        return Ok((Guard::Clean, f32::NEG_INFINITY));
     }
+    let log_total_before = set.log_total_weight();
     add_log_likelihoods(set, scan, field, origin, params)?;
-    Ok(set.normalise_guarded())
+    let mean_log_likelihood = set.log_total_weight() - log_total_before;
+    Ok((set.normalise_guarded(), mean_log_likelihood))
 }
 
 /// Reads LidarScan, OnMap → the map's OccupancyMap (origin) and DistanceField,
-/// LikelihoodFieldParams. Writes ParticleSet weights, FilterHealth.degeneracies.
+/// LikelihoodFieldParams. Writes ParticleSet weights, LikelihoodStats, FilterHealth.degeneracies.
 pub fn mcl_likelihood_field(
     params: Res<LikelihoodFieldParams>,
     maps: Query<(&OccupancyMap, &DistanceField)>,
-    mut robots: Query<(&LidarScan, &OnMap, &mut ParticleSet, &mut FilterHealth)>,
+    mut robots: Query<(&LidarScan, &OnMap, &mut ParticleSet, &mut FilterHealth, &mut LikelihoodStats)>,
 ) {
-    for (scan, on_map, mut set, mut health) in &mut robots {
+    for (scan, on_map, mut set, mut health, mut stats) in &mut robots {
         let Ok((map, field)) = maps.get(on_map.0) else {
             tracing::warn!("mcl_likelihood_field: map {:?} has no OccupancyMap + DistanceField", on_map.0);
             continue;
         };
         match weigh_likelihood_field(&mut set, scan, field, &map.origin, &params) {
-            Ok(Guard::ResetToUniform) => health.degeneracies += 1,
-            Ok(_) => {}
+            Ok((guard, mean_log_likelihood)) => {
+                health.degeneracies += u32::from(guard == Guard::ResetToUniform);
+                *stats = LikelihoodStats { mean_log_likelihood, updates: stats.updates + 1 };
+            }
             Err(e) => tracing::warn!("mcl_likelihood_field: {e}"),
         }
     }
@@ -246,6 +252,31 @@ mod tests {
         assert!(w[0] > 0.99, "true pose must dominate a pose 0.5 m away, weights {w:?}");
         assert!((w[0] + w[1] - 1.0).abs() < 1e-5, "weights normalised");
         assert_eq!(world.get::<FilterHealth>(robot).expect("health").degeneracies, 0);
+    }
+
+    #[test]
+    fn mcl_likelihood_field_records_mean_likelihood_before_normalising() {
+        let mut world = World::new();
+        world.insert_resource(LikelihoodFieldParams::default());
+        let truth = Pose2::new(0.6, 0.6, 0.3);
+        let map = spawn_room(&mut world, tiny_room());
+        let scan = marched_scan(&tiny_room(), truth);
+        let poses = [truth, Pose2::new(1.1, 0.6, 0.3)];
+        // Per-particle log-likelihoods, by the kernel on a copy with zero log-weights.
+        let mut raw = ParticleSet::from_poses(&poses);
+        raw.log_w = vec![0.0; 2];
+        let field = brute_field(&tiny_room());
+        add_log_likelihoods(&mut raw, &scan, &field, &Pose2::default(), &Default::default()).expect("field");
+        let expected = ((raw.log_w[0].exp() as f64 + raw.log_w[1].exp() as f64) / 2.0).ln() as f32;
+        let robot = world.spawn((scan, OnMap(map), ParticleSet::from_poses(&poses))).id();
+        world.run_system_once(mcl_likelihood_field).expect("system runs");
+        let stats = *world.get::<LikelihoodStats>(robot).expect("ParticleSet requires LikelihoodStats");
+        assert_eq!(stats.updates, 1, "one observation update recorded");
+        assert!(
+            (stats.mean_log_likelihood - expected).abs() < 1e-3,
+            "log mean likelihood {} vs log((p0 + p1)/2) = {expected}",
+            stats.mean_log_likelihood
+        );
     }
 
     #[test]

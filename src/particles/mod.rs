@@ -1,10 +1,12 @@
 //! ② Particles: the particle set and the filter steps, in the order a step runs them:
-//! init (fills empty sets) → transition → likelihood_field → resample → estimate. Each step is a
-//! plain kernel over a `ParticleSet` plus a small system; weights are log-weights, Σ exp = 1.
+//! init (fills empty sets) → transition → likelihood_field → (augmented recovery) → resample →
+//! estimate. Each step is a plain kernel over a `ParticleSet` plus a small system; weights are
+//! log-weights, Σ exp = 1.
 
 mod estimate;
 mod init;
 mod likelihood_field;
+mod recovery;
 mod resample;
 mod set;
 mod transition;
@@ -15,6 +17,9 @@ pub use likelihood_field::{
     LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,
     mcl_likelihood_field, weigh_likelihood_field,
 };
+pub use recovery::{
+    RecoveryParams, RecoveryState, augmented_recovery, inject_uniform, recover, update_averages,
+};
 pub use resample::{ResampleParams, resample, resample_soft, should_resample, systematic_indices};
-pub use set::{Degenerate, FilterHealth, Guard, ParticleError, ParticleSet};
+pub use set::{Degenerate, FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet};
 pub use transition::{TRANSITION_CHUNK, TransitionParams, propagate, transition};

@@ -10,7 +10,7 @@ use thiserror::Error;
 /// networks stream over contiguous memory. Log-weights are normalised: Σ exp(log_w) = 1.
 /// An empty set means "not initialised yet": an episode reset clears it, `init_particles` refills it.
 #[derive(Component, Clone, Debug, Default, PartialEq)]
-#[require(FilterHealth, PoseEstimate)]
+#[require(FilterHealth, PoseEstimate, LikelihoodStats)]
 pub struct ParticleSet {
     /// Positions, metres (world frame).
     pub x: Vec<f32>,
@@ -29,6 +29,33 @@ pub struct FilterHealth {
     /// Times `init_particles` could not honour the requested task and drew a global set instead
     /// (semi-global box without a traversable cell).
     pub reinitialisations: u32,
+    /// Particles replaced by uniform draws over the traversable map (`augmented_recovery`).
+    pub injected: u32,
+}
+
+/// What the last observation update measured before normalising: the input of augmented MCL's
+/// w_slow / w_fast averages (Probabilistic Robotics Table 8.3, w_avg).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct LikelihoodStats {
+    /// log Σ_k w_k·p(z | x_k): the log of the weighted mean observation likelihood, with the
+    /// weights w_k as they were before the update (normalised, so this is a mean). −∞ when every
+    /// particle got likelihood 0; meaningless while `updates` is 0.
+    pub mean_log_likelihood: f32,
+    /// Observation updates that wrote `mean_log_likelihood` (0 = none yet).
+    pub updates: u32,
+}
+
+impl ParticleSet {
+    /// log Σ exp(log_w) over the finite log-weights (log-sum-exp in f64); −∞ when none is finite.
+    pub fn log_total_weight(&self) -> f32 {
+        let finite = || self.log_w.iter().copied().filter(|l| l.is_finite());
+        let max = finite().fold(f32::NEG_INFINITY, f32::max);
+        if max == f32::NEG_INFINITY {
+            return f32::NEG_INFINITY;
+        }
+        let sum: f64 = finite().map(|l| ((l - max) as f64).exp()).sum();
+        max + sum.ln() as f32
+    }
 }
 
 /// The weights cannot be normalised: a NaN/+∞ log-weight, or every weight is zero.
