@@ -166,7 +166,7 @@ impl Localizer {
     pub fn observe(&mut self, scan: &LidarScan) -> PoseEstimate {
         let lf = &self.params.likelihood_field;
         match weigh_likelihood_field(&mut self.set, scan, &self.field, &self.map.origin, lf) {
-            Ok(Guard::ResetToUniform) => self.health.degeneracies += 1,
+            Ok((Guard::ResetToUniform, _)) => self.health.degeneracies += 1,
             Ok(_) => {}
             // The field is built from the map in `new`, so it always has width × height cells.
             Err(e) => tracing::warn!("replay localizer: {e}"),
