@@ -13,6 +13,7 @@ use crate::world::{EpisodeRng, OccupancyMap, OnMap, Pose2, RobotParams, SimClock
 use bevy::prelude::*;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 
 /// Goal drawing, path thinning and waypoint following of `goalnav`.
 #[derive(Resource, Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -39,6 +40,11 @@ pub struct GoalnavParams {
     /// Heading error at which forward motion stops, degrees; speed falls linearly from full at
     /// 0° to 0 here (our choice: 60).
     pub stop_heading_deg: f32,
+    /// Extra distance the planner keeps between the body and anything non-free, metres (our
+    /// choice: 0.1). The traversable map's erosion lets paths graze walls (cell centres only
+    /// `radius − resolution/2` from a wall's face); where the wider margin leaves no path to a
+    /// goal, goalnav plans on the plain traversable map.
+    pub clearance_m: f32,
     /// Steer by the filter's PoseEstimate instead of the true pose (reference: false).
     pub use_estimate: bool,
 }
@@ -54,6 +60,7 @@ impl Default for GoalnavParams {
             speed_mps: 0.5,
             heading_gain: 1.0,
             stop_heading_deg: 60.0,
+            clearance_m: 0.1,
             use_estimate: false,
         }
     }
@@ -90,17 +97,22 @@ impl Default for GoalPlan {
 /// Movement smaller than this does not count as getting closer, metres.
 const PROGRESS_M: f32 = 0.01;
 
+/// Path length short of `waypoint_spacing_m` that still counts as a full spacing, metres, so
+/// sums of cell steps (0.1 + 0.1 = 0.19999999 in f32) keep a waypoint every two cells.
+const SPACING_SLACK_M: f32 = 1e-4;
+
 /// How far from the robot's cell a traversable start cell is searched for, metres. Physics keeps
-/// the body off walls, but its centre can rest in the eroded margin the planner avoids.
-const START_SEARCH_M: f32 = 1.0;
+/// the body off walls, but its centre can rest in the eroded margin the planner avoids (plus
+/// `clearance_m`); farther than this, a start could lie behind a wall.
+const START_SEARCH_M: f32 = 0.5;
 
 impl GoalPlan {
     /// A plan along `path` (start cell first, goal last): keeps a waypoint every `spacing_m` of
     /// path length, and earlier wherever the straight line from the last kept waypoint would
-    /// leave the traversable map (so thinning never cuts a corner); always keeps the goal and
-    /// drops the start itself.
+    /// leave the traversable map (so thinning never cuts a corner); keeps the start (the robot
+    /// may stand a little off it; `advance` skips it otherwise) and the goal.
     pub fn along(path: &[(f32, f32)], spacing_m: f32, map: &OccupancyMap, trav: &TraversableMap) -> GoalPlan {
-        let mut waypoints = Vec::new();
+        let mut waypoints: Vec<(f32, f32)> = path.first().copied().into_iter().collect();
         let (mut anchor, mut since) = (0, 0.0);
         for k in 1..path.len() {
             let step = distance(path[k - 1], path[k]);
@@ -109,7 +121,7 @@ impl GoalPlan {
                 waypoints.push(path[k - 1]);
                 (anchor, since) = (k - 1, step);
             }
-            if since >= spacing_m {
+            if since >= spacing_m - SPACING_SLACK_M {
                 waypoints.push(path[k]);
                 (anchor, since) = (k, 0.0);
             }
@@ -236,6 +248,22 @@ pub fn draw_plan(
     farthest.map(|(_, path)| GoalPlan::along(&path, params.waypoint_spacing_m, map, trav))
 }
 
+/// A fresh plan, on `roomy` (the traversable map eroded by `clearance_m` more) when it yields
+/// one, else on the plain traversable map; an empty plan when neither does.
+pub fn new_plan(
+    pose: Pose2,
+    map: &OccupancyMap,
+    roomy: Option<&TraversableMap>,
+    trav: &TraversableMap,
+    params: &GoalnavParams,
+    rng: &mut impl Rng,
+) -> GoalPlan {
+    roomy
+        .and_then(|roomy| draw_plan(pose, map, roomy, params, rng))
+        .or_else(|| draw_plan(pose, map, trav, params, rng))
+        .unwrap_or_default()
+}
+
 /// One step of waypoint following from `pose`: skips reached waypoints, counts steps without
 /// progress, and steers to the next waypoint — angular ∝ heading error (saturating), forward
 /// speed falling with the heading error and capped so that one `step_s` step ends at the
@@ -262,25 +290,30 @@ pub fn follow(
     Action::new(linear_mps / limits.max_linear_mps, angular).clamped()
 }
 
+/// What `goalnav_policy` reads and writes on each robot.
+type GoalnavRobot = (
+    Entity,
+    &'static OnMap,
+    &'static TruePose,
+    Option<&'static PoseEstimate>,
+    Option<&'static mut GoalPlan>,
+    Has<EpisodeStart>,
+    &'static mut EpisodeRng,
+    &'static mut Action,
+);
+
 /// Reads TruePose (or PoseEstimate with `use_estimate`), EpisodeStart, OnMap, the map's
 /// OccupancyMap and TraversableMap, GoalnavParams, RobotParams, SimClock. Writes GoalPlan
-/// (inserted when missing), EpisodeRng, Action.
+/// (inserted when missing), EpisodeRng, Action. Keeps each map's wider-margin traversable map
+/// (`clearance_m`) in a per-system cache, built on first use.
 pub fn goalnav_policy(
     params: Res<GoalnavParams>,
     limits: Res<RobotParams>,
     clock: Res<SimClock>,
     mut commands: Commands,
+    mut roomy_maps: Local<HashMap<Entity, Option<TraversableMap>>>,
     maps: Query<(&OccupancyMap, &TraversableMap)>,
-    mut robots: Query<(
-        Entity,
-        &OnMap,
-        &TruePose,
-        Option<&PoseEstimate>,
-        Option<&mut GoalPlan>,
-        Has<EpisodeStart>,
-        &mut EpisodeRng,
-        &mut Action,
-    )>,
+    mut robots: Query<GoalnavRobot>,
 ) {
     for (robot, on, truth, estimate, plan, restart, mut rng, mut action) in &mut robots {
         let Ok((map, trav)) = maps.get(on.0) else { continue };
@@ -292,7 +325,10 @@ pub fn goalnav_policy(
         };
         plan.advance(pose.x, pose.y, params.reach_m);
         if needs_new_plan(plan, restart, &params) {
-            *plan = draw_plan(pose, map, trav, &params, &mut rng.0).unwrap_or_default();
+            let roomy = roomy_maps
+                .entry(on.0)
+                .or_insert_with(|| TraversableMap::build(map, limits.radius_m + params.clearance_m).ok());
+            *plan = new_plan(pose, map, roomy.as_ref(), trav, &params, &mut rng.0);
         }
         *action = follow(pose, plan, &params, &limits, clock.agent_step_s);
         if let Some(plan) = fresh {
@@ -384,7 +420,7 @@ mod tests {
             }
         }
         assert!(
-            plan.waypoints.iter().any(|&(_, y)| y < 0.7 || y > 1.2),
+            plan.waypoints.iter().any(|&(_, y)| !(0.7..=1.2).contains(&y)),
             "the path must detour above or below the pillar: {:?}",
             plan.waypoints
         );
@@ -450,6 +486,23 @@ mod tests {
         let now = world.get::<GoalPlan>(robot).unwrap();
         assert_ne!(now.goal, first.goal, "a stalled robot draws a new goal");
         assert_eq!(now.steps_without_progress, 0, "progress counting restarts with the new plan");
+    }
+
+    #[test]
+    fn goalnav_policy_steers_by_the_estimate_only_when_asked() {
+        let truth = Pose2::new(0.35, 0.75, 0.0);
+        let plan = GoalPlan { goal: (0.75, 0.75), waypoints: vec![(0.75, 0.75)], ..GoalPlan::default() };
+        let mut angular = Vec::new();
+        for use_estimate in [false, true] {
+            let (mut world, robot) = world_with_robot(truth, 4);
+            world.insert_resource(GoalnavParams { use_estimate, ..GoalnavParams::default() });
+            let estimate = PoseEstimate { pose: Pose2::new(0.35, 0.75, 1.5), ..PoseEstimate::default() };
+            world.entity_mut(robot).insert((plan.clone(), estimate));
+            world.run_system_once(goalnav_policy).unwrap();
+            angular.push(world.get::<Action>(robot).unwrap().angular);
+        }
+        assert!(angular[0].abs() < 1e-6, "by the true pose the waypoint is dead ahead: {}", angular[0]);
+        assert!(angular[1] < -0.99, "by the estimate (facing +y) it lies to the right: {}", angular[1]);
     }
 
     #[test]
