@@ -2,7 +2,9 @@
 //! likelihood, a belief projection, an agent) joins by adding one `register` call here.
 
 use crate::act::{drive, physics};
-use crate::agent::random_policy;
+use crate::agent::{
+    AvoidParams, GoalnavParams, TurnParams, avoid_policy, goalnav_policy, random_policy, turn_policy,
+};
 use crate::compose::registry::{NoParams, Registry, SystemSpec};
 use crate::episode::{KidnapParams, episode_reset, kidnap, step_metrics};
 use crate::particles::{
@@ -142,6 +144,18 @@ pub fn standard_registry() -> Registry {
     .register::<NoParams, _, _>(
         spec("random_policy", Agent, "Reads EpisodeRng. Writes Action.", &[], &["Action"]),
         random_policy,
+    )
+    .register::<TurnParams, _, _>(
+        spec("turn_policy", Agent, "Reads TurnParams. Writes Action.", &[], &["Action"]),
+        turn_policy,
+    )
+    .register::<AvoidParams, _, _>(
+        spec("avoid_policy", Agent, "Reads DepthStrip, AvoidParams, RobotParams. Writes Action.", &["DepthStrip"], &["Action"]),
+        avoid_policy,
+    )
+    .register::<GoalnavParams, _, _>(
+        spec("goalnav_policy", Agent, "Reads TruePose (or PoseEstimate), EpisodeStart, the map's TraversableMap, EpisodeRng. Writes GoalPlan, Action.", &[], &["Action"]),
+        goalnav_policy,
     )
     .register::<NoParams, _, _>(
         spec("drive", Act, "Reads Action, RobotParams. Writes DriveCommand.", &["Action"], &["DriveCommand"]),
