@@ -265,7 +265,7 @@ fn error_chart<DB: DrawingBackend>(
     let mut chart = ChartBuilder::on(area)
         .margin(15)
         .x_label_area_size(55)
-        .y_label_area_size(80)
+        .y_label_area_size(100)
         .build_cartesian_2d(1f32..last, 0f32..top)
         .map_err(draw_err)?;
     chart
