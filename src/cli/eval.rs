@@ -1,8 +1,14 @@
 //! `apfn eval --config FILE.ron [--out DIR]`: every cell of localizer × policy × task × split,
-//! cells in parallel, with a progress bar; writes results.json, results.csv and results.md.
+//! cells in parallel, with a progress bar; writes results.json, results.csv and results.md, and
+//! with `--figures N` a PNG of each cell's first N episodes under `figures/`.
 
 use crate::cli::set_threads;
-use crate::eval::{EvalConfig, ResultRow, cell_steps, cells, run_cell, write_results};
+use crate::eval::{
+    CellOutcome, EvalConfig, ResultRow, cell_steps, cells, encode_png, episode_figure, figure_file_name,
+    figure_title, run_cell, write_results,
+};
+use crate::world::map::write_atomically;
+use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::path::PathBuf;
@@ -19,6 +25,9 @@ pub struct EvalArgs {
     /// Worker threads (default: all cores); the same seed and thread count give the same table.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Draw each cell's first N episodes as `<out>/figures/<localizer>_<policy>_<task>_<split>_ep<k>.png`.
+    #[arg(long, default_value_t = 0)]
+    pub figures: usize,
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
@@ -32,12 +41,16 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     );
     bar.set_message(cells.len().to_string());
     let started = Instant::now();
-    let rows = cells
+    let outcomes = cells
         .par_iter()
-        .map(|cell| run_cell(&eval, cell, || bar.inc(1)).map(|outcome| outcome.row))
-        .collect::<Result<Vec<ResultRow>, _>>()?;
+        .map(|cell| {
+            run_cell(&eval, cell, || bar.inc(1)).map(|outcome| keep_for_figures(outcome, args.figures))
+        })
+        .collect::<Result<Vec<CellOutcome>, _>>()?;
     bar.finish_and_clear();
+    let rows: Vec<ResultRow> = outcomes.iter().map(|o| o.row.clone()).collect();
     write_results(&args.out, &rows)?;
+    let figures = write_figures(&args.out.join("figures"), &outcomes)?;
     println!(
         "{} cells, {} agent steps in {:.1} s ({} threads); wrote {}/results.{{json,csv,md}}",
         rows.len(),
@@ -46,6 +59,36 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         rayon::current_num_threads(),
         args.out.display()
     );
+    if figures > 0 {
+        println!("wrote {figures} episode figures to {}", args.out.join("figures").display());
+    }
     print!("{}", crate::eval::markdown(&rows));
     Ok(())
+}
+
+/// Keeps a cell's first `n` episode records and only the maps they ran on.
+fn keep_for_figures(mut outcome: CellOutcome, n: usize) -> CellOutcome {
+    outcome.records.truncate(n);
+    let records = &outcome.records;
+    outcome.maps.retain(|map, _| records.iter().any(|r| r.map == *map));
+    outcome
+}
+
+/// Draws every kept record; returns how many figures were written.
+fn write_figures(dir: &std::path::Path, outcomes: &[CellOutcome]) -> anyhow::Result<usize> {
+    let jobs: Vec<_> =
+        outcomes.iter().flat_map(|o| o.records.iter().enumerate().map(move |(k, r)| (o, k, r))).collect();
+    if jobs.is_empty() {
+        return Ok(0);
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    jobs.par_iter().try_for_each(|(outcome, k, record)| {
+        let name = figure_file_name(&outcome.row, *k);
+        let map = outcome.maps.get(&record.map).with_context(|| format!("{name}: its map was not kept"))?;
+        let image =
+            episode_figure(map, record, &figure_title(&outcome.row, *k)).with_context(|| name.clone())?;
+        write_atomically(&dir.join(&name), &encode_png(&image)?)?;
+        anyhow::Ok(())
+    })?;
+    Ok(jobs.len())
 }

@@ -1,10 +1,15 @@
 //! Evaluation: crosses schedules (localizer × policy) with tasks and map groups, runs each cell's
-//! episodes in a batched world, and writes the paper-style tables.
+//! episodes in a batched world, and writes the paper-style tables
+//! and episode figures.
 
 mod cell;
 mod config;
+mod figure;
+mod pixel_text;
 mod table;
 
 pub use cell::{CellOutcome, CellSpec, ResultRow, cell_steps, cells, labels, run_cell, schedule_labels};
 pub use config::{EvalConfig, LoadedEval, MapGroup};
+pub use figure::{FigureError, encode_png, episode_figure, figure_file_name, figure_title};
+pub use pixel_text::PixelText;
 pub use table::{csv, markdown, task_name, write_results};

@@ -1,0 +1,381 @@
+//! The paper-style figure of one episode: left, the map around the episode (north up) with the
+//! particles after the first filter update, the true and estimated paths and their start and final
+//! poses; right, position and heading error over the episode's steps.
+
+use crate::cli::map::render;
+use crate::episode::{EpisodeLog, EpisodeRecord, SUCCESS_RADIUS_M};
+use crate::eval::cell::ResultRow;
+use crate::eval::pixel_text::PixelText;
+use crate::eval::table::task_name;
+use crate::world::{OccupancyMap, Pose2};
+use image::{ImageFormat, Rgb, RgbImage, imageops};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use std::io::Cursor;
+
+/// Figure size (pixels), the title strip's height and the map panel: left, top, width, height.
+const SIZE: (u32, u32) = (1400, 700);
+const TITLE_H: i32 = 50;
+const MAP_PANEL: (i32, i32, u32, u32) = (15, 55, 670, 560);
+/// Space shown around the episode's trajectories and particles (metres).
+const MARGIN_M: f32 = 2.0;
+const TRUTH: RGBColor = RGBColor(0, 150, 60);
+const ESTIMATE: RGBColor = RGBColor(235, 95, 0);
+const PARTICLE: RGBColor = RGBColor(40, 70, 220);
+/// Pixel-font sizes: 27 draws glyph pixels 2 × 2, 40 draws them 3 × 3 (see `pixel_text`).
+const TEXT: (&str, u32) = ("sans-serif", 27);
+
+#[derive(Debug, thiserror::Error)]
+pub enum FigureError {
+    #[error("episode {episode} logged no poses: nothing to draw")]
+    Empty { episode: u32 },
+    #[error("drawing the figure: {0}")]
+    Draw(String),
+    #[error("encoding the figure as PNG: {0}")]
+    Encode(#[from] image::ImageError),
+}
+
+fn draw_err(e: impl std::error::Error) -> FigureError {
+    FigureError::Draw(e.to_string())
+}
+
+/// "mcl · turn · tracking · seen · episode 3".
+pub fn figure_title(row: &ResultRow, k: usize) -> String {
+    format!("{} · {} · {} · {} · episode {k}", row.localizer, row.policy, task_name(row.task), row.split)
+}
+
+/// "mcl_turn_tracking_seen_ep3.png".
+pub fn figure_file_name(row: &ResultRow, k: usize) -> String {
+    format!("{}_{}_{}_{}_ep{k}.png", row.localizer, row.policy, task_name(row.task), row.split)
+}
+
+pub fn encode_png(image: &RgbImage) -> Result<Vec<u8>, FigureError> {
+    let mut png = Vec::new();
+    image.write_to(&mut Cursor::new(&mut png), ImageFormat::Png)?;
+    Ok(png)
+}
+
+/// Where the map crop lands: grid cells [i0, i1) × [j0, j1) scaled by `px_per_cell`, its top-left
+/// corner at (left, top).
+struct View {
+    i0: u32,
+    i1: u32,
+    j0: u32,
+    j1: u32,
+    px_per_cell: f32,
+    left: i32,
+    top: i32,
+}
+
+impl View {
+    /// The crop holding every point plus the margin, clamped to the map, fitted to the panel.
+    fn fit(map: &OccupancyMap, points: impl Iterator<Item = (f32, f32)>) -> View {
+        let margin = MARGIN_M / map.resolution_m;
+        let (mut lo, mut hi) = ((f32::MAX, f32::MAX), (f32::MIN, f32::MIN));
+        for (gx, gy) in
+            points.map(|(x, y)| map.world_to_grid(x, y)).filter(|p| p.0.is_finite() && p.1.is_finite())
+        {
+            (lo, hi) = ((lo.0.min(gx), lo.1.min(gy)), (hi.0.max(gx), hi.1.max(gy)));
+        }
+        let clamp = |v: f32, n: usize| v.clamp(0.0, n as f32) as u32;
+        let (mut i0, mut i1) =
+            (clamp((lo.0 - margin).floor(), map.width), clamp((hi.0 + margin).ceil(), map.width));
+        let (mut j0, mut j1) =
+            (clamp((lo.1 - margin).floor(), map.height), clamp((hi.1 + margin).ceil(), map.height));
+        if i1 <= i0 || j1 <= j0 {
+            (i0, i1, j0, j1) = (0, map.width as u32, 0, map.height as u32); // all points off the map
+        }
+        let (x, y, w, h) = MAP_PANEL;
+        let px_per_cell = (w as f32 / (i1 - i0) as f32).min(h as f32 / (j1 - j0) as f32);
+        let (sw, sh) = (((i1 - i0) as f32 * px_per_cell) as i32, ((j1 - j0) as f32 * px_per_cell) as i32);
+        View { i0, i1, j0, j1, px_per_cell, left: x + (w as i32 - sw) / 2, top: y + (h as i32 - sh) / 2 }
+    }
+
+    fn size(&self) -> (u32, u32) {
+        let scaled = |n: u32| (n as f32 * self.px_per_cell) as u32;
+        (scaled(self.i1 - self.i0), scaled(self.j1 - self.j0))
+    }
+
+    fn pixel(&self, map: &OccupancyMap, x: f32, y: f32) -> (i32, i32) {
+        let (gx, gy) = map.world_to_grid(x, y);
+        let k = self.px_per_cell;
+        (self.left + ((gx - self.i0 as f32) * k) as i32, self.top + ((self.j1 as f32 - gy) * k) as i32)
+    }
+
+    /// A triangle pointing along the pose's heading (image y grows down).
+    fn arrow(&self, map: &OccupancyMap, pose: &Pose2) -> Vec<(i32, i32)> {
+        let (cx, cy) = self.pixel(map, pose.x, pose.y);
+        let (s, c) = (pose.yaw - map.origin.yaw).sin_cos();
+        let at =
+            |ahead: f32, side: f32| (cx + (c * ahead + s * side) as i32, cy + (-s * ahead + c * side) as i32);
+        vec![at(16.0, 0.0), at(-8.0, 8.0), at(-8.0, -8.0)]
+    }
+}
+
+/// Draws one episode on its map; `title` goes above both panels.
+pub fn episode_figure(
+    map: &OccupancyMap,
+    record: &EpisodeRecord,
+    title: &str,
+) -> Result<RgbImage, FigureError> {
+    let log = &record.log;
+    if log.truth.is_empty() || log.estimates.is_empty() {
+        return Err(FigureError::Empty { episode: record.episode });
+    }
+    let poses = log.truth.iter().chain(&log.estimates).map(|p| (p.x, p.y));
+    let view = View::fit(map, poses.chain(log.first_particles.iter().copied()));
+    let mut canvas = RgbImage::from_pixel(SIZE.0, SIZE.1, Rgb([255, 255, 255]));
+    let background = render(map, None);
+    let crop = imageops::crop_imm(
+        &background,
+        view.i0,
+        map.height as u32 - view.j1,
+        view.i1 - view.i0,
+        view.j1 - view.j0,
+    );
+    let (w, h) = view.size();
+    let scaled = imageops::resize(&crop.to_image(), w, h, imageops::FilterType::Nearest);
+    imageops::replace(&mut canvas, &scaled, view.left as i64, view.top as i64);
+    {
+        let root = PixelText(BitMapBackend::with_buffer(&mut canvas, SIZE)).into_drawing_area();
+        draw_map_overlay(&root, map, &view, log)?;
+        let centred = Pos::new(HPos::Center, VPos::Center);
+        let font = ("sans-serif", 40).into_font().color(&BLACK).pos(centred);
+        root.draw(&Text::new(title, (SIZE.0 as i32 / 2, TITLE_H / 2 + 5), font)).map_err(draw_err)?;
+        let (_, right) = root.split_horizontally(MAP_PANEL.0 as u32 + MAP_PANEL.2 + 15);
+        let (_, right) = right.split_vertically(TITLE_H);
+        let (top, bottom) = right.split_vertically((SIZE.1 - TITLE_H as u32) / 2);
+        let pos: Vec<f32> = log.errors.iter().map(|e| e.pos_err_m).collect();
+        let yaw: Vec<f32> = log.errors.iter().map(|e| e.orient_err_rad).collect();
+        error_chart(&top, &pos, "position error (m)", Some(SUCCESS_RADIUS_M))?;
+        error_chart(&bottom, &yaw, "|heading error| (rad)", None)?;
+        root.present().map_err(draw_err)?;
+    }
+    Ok(canvas)
+}
+
+/// Particles, paths, start and final poses (clipped to the map crop), a frame, the legend and a
+/// scale bar.
+fn draw_map_overlay<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    map: &OccupancyMap,
+    view: &View,
+    log: &EpisodeLog,
+) -> Result<(), FigureError> {
+    for &(x, y) in &log.first_particles {
+        root.draw(&Circle::new(view.pixel(map, x, y), 2, PARTICLE.mix(0.45).filled())).map_err(draw_err)?;
+    }
+    let paths = [(&log.truth, TRUTH, 4), (&log.estimates, ESTIMATE, 2)];
+    for (poses, colour, width) in paths {
+        let path: Vec<(i32, i32)> = poses.iter().map(|p| view.pixel(map, p.x, p.y)).collect();
+        root.draw(&PathElement::new(path, colour.stroke_width(width))).map_err(draw_err)?;
+    }
+    for (poses, colour, _) in paths {
+        let (Some(first), Some(last)) = (poses.first(), poses.last()) else { continue };
+        start_marker(root, view.arrow(map, first), colour)?;
+        root.draw(&Polygon::new(view.arrow(map, last), colour.filled())).map_err(draw_err)?;
+        let outline: Vec<_> = view.arrow(map, last).into_iter().cycle().take(4).collect();
+        root.draw(&PathElement::new(outline, BLACK.stroke_width(1))).map_err(draw_err)?;
+    }
+    // Clip: white out the left panel around the map crop (estimates may leave the map).
+    let (w, h) = view.size();
+    let (l, t, r, b) = (view.left, view.top, view.left + w as i32, view.top + h as i32);
+    let (panel_r, panel_b) = (MAP_PANEL.0 + MAP_PANEL.2 as i32 + 14, MAP_PANEL.1 + MAP_PANEL.3 as i32 + 4);
+    for mask in [
+        [(0, 0), (panel_r, t - 1)],
+        [(0, b), (panel_r, panel_b)],
+        [(0, t), (l - 1, b)],
+        [(r, t), (panel_r, b)],
+    ] {
+        root.draw(&Rectangle::new(mask, WHITE.filled())).map_err(draw_err)?;
+    }
+    root.draw(&Rectangle::new([(l - 1, t - 1), (r, b)], BLACK.stroke_width(1))).map_err(draw_err)?;
+    // Legend: two rows under the map.
+    let (x, y) = (MAP_PANEL.0 + 5, MAP_PANEL.1 + MAP_PANEL.3 as i32 + 22);
+    let label = |text: &str, at: (i32, i32)| {
+        root.draw(&Text::new(
+            text.to_owned(),
+            at,
+            TEXT.into_font().color(&BLACK).pos(Pos::new(HPos::Left, VPos::Center)),
+        ))
+        .map_err(draw_err)
+    };
+    for (k, (text, colour)) in [("true path", TRUTH), ("estimate", ESTIMATE)].into_iter().enumerate() {
+        let x = x + 190 * k as i32;
+        root.draw(&PathElement::new(vec![(x, y), (x + 40, y)], colour.stroke_width(4 - 2 * k as u32)))
+            .map_err(draw_err)?;
+        label(text, (x + 50, y))?;
+    }
+    let x = x + 380;
+    for dx in [4, 12, 9, 18, 25, 31] {
+        root.draw(&Circle::new((x + dx, y + (dx % 3) * 3 - 3), 2, PARTICLE.mix(0.6).filled()))
+            .map_err(draw_err)?;
+    }
+    label("particles at step 1", (x + 42, y))?;
+    let (x, y) = (MAP_PANEL.0 + 5, y + 32);
+    let marker = |dx: i32| vec![(x + dx + 16, y), (x + dx, y - 8), (x + dx, y + 8)];
+    start_marker(root, marker(0), BLACK)?;
+    label("start", (x + 28, y))?;
+    root.draw(&Polygon::new(marker(110), BLACK.filled())).map_err(draw_err)?;
+    label("final pose", (x + 138, y))?;
+    let bar_m = [1.0f32, 2.0, 5.0, 10.0]
+        .into_iter()
+        .find(|m| m / map.resolution_m * view.px_per_cell >= 60.0)
+        .unwrap_or(20.0);
+    let bar_px = (bar_m / map.resolution_m * view.px_per_cell) as i32;
+    let right = MAP_PANEL.0 + MAP_PANEL.2 as i32 - 5;
+    root.draw(&PathElement::new(vec![(right - bar_px, y), (right, y)], BLACK.stroke_width(4)))
+        .map_err(draw_err)?;
+    let at = (right - bar_px - 10, y);
+    root.draw(&Text::new(
+        format!("{bar_m} m"),
+        at,
+        TEXT.into_font().color(&BLACK).pos(Pos::new(HPos::Right, VPos::Center)),
+    ))
+    .map_err(draw_err)
+}
+
+/// A hollow heading triangle: white inside, coloured outline.
+fn start_marker<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    corners: Vec<(i32, i32)>,
+    colour: RGBColor,
+) -> Result<(), FigureError> {
+    root.draw(&Polygon::new(corners.clone(), WHITE.filled())).map_err(draw_err)?;
+    let outline: Vec<_> = corners.iter().chain(corners.first()).copied().collect();
+    root.draw(&PathElement::new(outline, colour.stroke_width(3))).map_err(draw_err)
+}
+
+/// One error curve over steps 1…T, with a dashed line at `threshold` if given.
+fn error_chart<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    values: &[f32],
+    y_desc: &str,
+    threshold: Option<f32>,
+) -> Result<(), FigureError> {
+    let last = (values.len() as f32).max(2.0);
+    let top = values
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(threshold.unwrap_or(0.0) * 1.5, f32::max)
+        .max(0.1)
+        * 1.1;
+    let mut chart = ChartBuilder::on(area)
+        .margin(15)
+        .x_label_area_size(55)
+        .y_label_area_size(100)
+        .build_cartesian_2d(1f32..last, 0f32..top)
+        .map_err(draw_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("step")
+        .y_desc(y_desc)
+        .x_labels(8)
+        .y_labels(6)
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.*}", if top < 0.5 { 2 } else { 1 }))
+        .label_style(TEXT)
+        .axis_desc_style(TEXT)
+        .light_line_style(RGBColor(236, 236, 236))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .draw()
+        .map_err(draw_err)?;
+    let curve = values.iter().enumerate().map(|(k, v)| (k as f32 + 1.0, *v));
+    let style = RGBColor(180, 30, 30).stroke_width(3);
+    chart
+        .draw_series(LineSeries::new(curve, style))
+        .map_err(draw_err)?
+        .label(y_desc.split(" (").next().unwrap_or(y_desc).trim_matches('|'))
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
+    if let Some(r) = threshold {
+        let dashed = BLACK.stroke_width(2);
+        chart
+            .draw_series(DashedLineSeries::new([(1.0, r), (last, r)], 10, 7, dashed))
+            .map_err(draw_err)?
+            .label(format!("success radius {r} m"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], dashed));
+    }
+    chart
+        .configure_series_labels()
+        .label_font(TEXT)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(draw_err)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::episode::{EpisodeLog, StepError};
+    use crate::testing::tiny_room;
+    use bevy::prelude::Entity;
+
+    /// Five steps east along y = 0.5 m in the tiny room; the estimate trails 0.2 m behind.
+    fn record() -> EpisodeRecord {
+        let truth: Vec<Pose2> = (0..5).map(|k| Pose2 { x: 0.4 + 0.2 * k as f32, y: 0.5, yaw: 0.0 }).collect();
+        let estimates: Vec<Pose2> =
+            truth.iter().map(|p| Pose2 { x: p.x - 0.2, y: p.y + 0.1, yaw: 0.3 }).collect();
+        let errors = truth.iter().zip(&estimates).map(|(t, e)| StepError::between(e, t)).collect();
+        let first_particles = (0..50).map(|k| (0.3 + 0.02 * k as f32, 0.9)).collect();
+        let log = EpisodeLog { errors, truth, estimates, first_particles, collisions: 0 };
+        EpisodeRecord { robot: Entity::PLACEHOLDER, map: Entity::PLACEHOLDER, episode: 3, log }
+    }
+
+    fn near(img: &RgbImage, (cx, cy): (i32, i32), r: i32, want: impl Fn(&Rgb<u8>) -> bool) -> bool {
+        (cx - r..=cx + r).flat_map(|x| (cy - r..=cy + r).map(move |y| (x, y))).any(|(x, y)| {
+            x >= 0
+                && y >= 0
+                && (x as u32) < img.width()
+                && (y as u32) < img.height()
+                && want(img.get_pixel(x as u32, y as u32))
+        })
+    }
+
+    #[test]
+    fn episode_figure_draws_paths_on_the_map_and_the_error_curves() {
+        let (map, record) = (tiny_room(), record());
+        let img = episode_figure(&map, &record, "mcl · turn · tracking · seen · episode 3").expect("figure");
+        assert_eq!(img.dimensions(), SIZE, "fixed figure size");
+        let view = View::fit(&map, record.log.truth.iter().map(|p| (p.x, p.y)));
+        assert_eq!(
+            (view.i0, view.i1, view.j0, view.j1),
+            (0, 20, 0, 15),
+            "2 m margin clamps to the whole 2 × 1.5 m room"
+        );
+        let green = |p: &Rgb<u8>| p.0 == [TRUTH.0, TRUTH.1, TRUTH.2];
+        let mid = &record.log.truth[2];
+        assert!(
+            near(&img, view.pixel(&map, mid.x, mid.y), 2, green),
+            "true path is green where its middle pose maps"
+        );
+        let (fx, fy) = view.pixel(&map, 1.0, 1.2);
+        assert!(!near(&img, (fx, fy), 3, green), "no green far from the path, at ({fx}, {fy})");
+        let wall = view.pixel(&map, 0.05, 1.45);
+        assert_eq!(
+            img.get_pixel(wall.0 as u32 + 2, wall.1 as u32 + 2).0,
+            [0, 0, 0],
+            "the map's top-left wall is black"
+        );
+        let curve = |p: &Rgb<u8>| p.0 == [180, 30, 30];
+        let right_panel = (MAP_PANEL.0 as u32 + MAP_PANEL.2 + 15)..SIZE.0;
+        let drawn = right_panel
+            .flat_map(|x| (0..SIZE.1).map(move |y| (x, y)))
+            .filter(|&(x, y)| curve(img.get_pixel(x, y)))
+            .count();
+        assert!(drawn > 200, "both error curves are drawn in the right panel ({drawn} curve pixels)");
+        let png = encode_png(&img).expect("encode");
+        assert!(image::load_from_memory(&png).is_ok(), "PNG decodes");
+    }
+
+    #[test]
+    fn an_episode_without_poses_is_an_error() {
+        let mut record = record();
+        record.log.truth.clear();
+        let err = episode_figure(&tiny_room(), &record, "t").expect_err("nothing to draw");
+        assert!(err.to_string().contains("episode 3"), "{err}");
+    }
+}
