@@ -2,9 +2,9 @@
 
 use crate::world::RobotParams;
 use crate::world::map::procedural::{ApartmentParams, generate_apartment};
-use crate::world::map::{Cell, OccupancyMap, TraversableMap, load_ros_map, save_ros_map, write_atomically};
+use crate::world::map::{TraversableMap, load_ros_map, render, save_ros_map, write_atomically};
 use anyhow::{Context, bail};
-use image::{ImageFormat, Rgb, RgbImage};
+use image::ImageFormat;
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
@@ -100,24 +100,12 @@ fn round6(x: f64) -> f64 {
     (x * 1e6).round() / 1e6
 }
 
-/// One pixel per cell, image row 0 = the map's top row.
-pub fn render(map: &OccupancyMap, trav: Option<&TraversableMap>) -> RgbImage {
-    let reachable = |i: usize, j: usize| trav.is_some_and(|t| t.is_traversable(i, j));
-    RgbImage::from_fn(map.width as u32, map.height as u32, |x, row| {
-        let (i, j) = (x as usize, map.height - 1 - row as usize);
-        match map.get(i, j) {
-            Cell::Free if reachable(i, j) => Rgb([214, 232, 255]),
-            Cell::Free => Rgb([255, 255, 255]),
-            Cell::Occupied => Rgb([0, 0, 0]),
-            Cell::Unknown => Rgb([150, 150, 150]),
-        }
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::testing::tiny_room;
+    use crate::world::Cell;
+    use image::Rgb;
     use clap::Parser;
 
     #[derive(Parser)]

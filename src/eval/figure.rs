@@ -2,11 +2,11 @@
 //! particles after the first filter update, the true and estimated paths and their start and final
 //! poses; right, position and heading error over the episode's steps.
 
-use crate::cli::map::render;
 use crate::episode::{EpisodeLog, EpisodeRecord, SUCCESS_RADIUS_M};
 use crate::eval::cell::ResultRow;
 use crate::eval::pixel_text::PixelText;
 use crate::eval::table::task_name;
+use crate::world::map::render;
 use crate::world::{OccupancyMap, Pose2};
 use image::{ImageFormat, Rgb, RgbImage, imageops};
 use plotters::coord::Shift;

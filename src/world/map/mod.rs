@@ -7,12 +7,14 @@ mod error;
 mod layers;
 mod occupancy;
 pub mod procedural;
+mod render;
 mod ros_io;
 
 pub use astar::{plan_cells, plan_path};
 pub use error::MapError;
 pub use layers::{DistanceField, NetworkMap, TraversableMap};
 pub use occupancy::{Cell, OccupancyMap};
+pub use render::render;
 pub use ros_io::{
     MapMode, RosMapYaml, classify_pixel, load_ros_map, occupancy_from_image, read_ros_yaml, save_ros_map,
     write_atomically,
