@@ -23,6 +23,8 @@ pub mod compose;
 
 pub mod eval;
 
+pub mod sweep;
+
 pub mod plugin;
 
 pub mod cli;

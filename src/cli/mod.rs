@@ -3,6 +3,7 @@
 pub mod eval;
 pub mod map;
 pub mod run;
+pub mod sweep;
 pub mod systems;
 
 use clap::{Parser, Subcommand};
@@ -24,6 +25,8 @@ pub enum Command {
     Run(run::RunArgs),
     /// Evaluate localizers × policies × tasks × maps and write the paper-style tables.
     Eval(eval::EvalArgs),
+    /// Run an eval config for many seeds as independent jobs; merge to mean ± 95 % CI tables.
+    Sweep(sweep::SweepArgs),
     /// List the registered systems with their parameters.
     #[command(subcommand)]
     Systems(systems::SystemsCommand),
@@ -35,6 +38,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Map(cmd) => map::run(cmd),
         Command::Run(args) => run::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Sweep(args) => sweep::run(args),
         Command::Systems(cmd) => systems::run(cmd),
     }
 }
