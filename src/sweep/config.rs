@@ -14,8 +14,8 @@
 //! )
 //! ```
 //!
-//! `eval.seed` is ignored: each job runs with one of `seeds`. `out` is relative to this file;
-//! without it, results go to `results/<file stem>` in the current directory.
+//! `eval.seed` is ignored: each job runs with one of `seeds`. `out` is relative to this file
+//! (`apfn sweep --out DIR` overrides it).
 
 use crate::eval::{EvalConfig, LoadedEval};
 use crate::sweep::error::SweepError;
@@ -29,9 +29,8 @@ pub struct SweepConfig {
     pub eval: EvalConfig,
     /// One job per seed for every cell; the table reports mean and 95 % CI across them.
     pub seeds: Vec<u64>,
-    /// Output folder, relative to the sweep file.
-    #[serde(default)]
-    pub out: Option<PathBuf>,
+    /// Output folder for `jobs/` and the merged tables, relative to the sweep file.
+    pub out: PathBuf,
 }
 
 /// A sweep with every schedule and map loaded and validated, before any job runs.
@@ -47,8 +46,8 @@ pub struct LoadedSweep {
 impl SweepConfig {
     /// Reads a sweep file and loads everything it names, so that a typo fails in seconds.
     pub fn load(path: &Path) -> Result<LoadedSweep, SweepError> {
-        let text =
-            std::fs::read_to_string(path).map_err(|source| SweepError::Read { path: path.to_owned(), source })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| SweepError::Read { path: path.to_owned(), source })?;
         let config: SweepConfig = ron::Options::default().from_str(&text).map_err(|e| SweepError::Parse {
             path: path.to_owned(),
             line: e.span.start.line,
@@ -68,17 +67,13 @@ impl SweepConfig {
         if self.seeds.is_empty() {
             return Err(invalid("seeds", "expected at least one seed".into()));
         }
-        if let Some(seed) = self.seeds.iter().enumerate().find_map(|(i, s)| self.seeds[..i].contains(s).then_some(s)) {
+        if let Some(seed) =
+            self.seeds.iter().enumerate().find_map(|(i, s)| self.seeds[..i].contains(s).then_some(s))
+        {
             return Err(invalid("seeds", format!("seed {seed} is listed twice; expected distinct seeds")));
         }
         let base = path.parent().unwrap_or(Path::new("."));
-        let out = match &self.out {
-            Some(out) => base.join(out),
-            None => {
-                let stem = path.file_stem().map_or("sweep".into(), |s| s.to_string_lossy().into_owned());
-                Path::new("results").join(stem)
-            }
-        };
+        let out = base.join(&self.out);
         let eval = self.eval.clone().into_loaded(path)?;
         Ok(LoadedSweep { path: path.to_owned(), config: self, eval, out })
     }

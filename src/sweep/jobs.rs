@@ -30,8 +30,11 @@ pub fn jobs(sweep: &LoadedSweep) -> Result<Vec<Job>, SweepError> {
         for (group, map_group) in eval.config.maps.iter().enumerate() {
             for &task in &eval.config.tasks {
                 for &seed in &sweep.config.seeds {
-                    let name =
-                        format!("{stem}__{}__{}__seed{seed}", task_name(task), safe(&map_group.split_label()));
+                    let name = format!(
+                        "{stem}__{}__{}__seed{seed}",
+                        task_name(task),
+                        safe(&map_group.split_label())
+                    );
                     if let Some(other) = jobs.iter().find(|j| j.name == name) {
                         return Err(SweepError::Invalid {
                             path: sweep.path.clone(),

@@ -68,7 +68,11 @@ pub fn job_status(sweep: &LoadedSweep, out: &Path, job: &Job) -> Result<JobStatu
             message: format!("holds job `{}`, expected `{}`", result.name, job.name),
         });
     }
-    Ok(if result.fingerprint == fingerprint(sweep, job)? { JobStatus::Done(result) } else { JobStatus::Stale })
+    Ok(if result.fingerprint == fingerprint(sweep, job)? {
+        JobStatus::Done(result)
+    } else {
+        JobStatus::Stale
+    })
 }
 
 /// Everything a job's numbers depend on, hashed: the schedule file's text, the task, the map
