@@ -45,9 +45,9 @@ fn sweep_runs_job_by_job_then_merges_and_skips_finished_jobs() {
     assert!(!dir.path().join("out").exists(), "--list-jobs must not write anything");
 
     // One job at a time, as a Slurm array or GNU parallel would run them.
-    for i in 0..3 {
+    for (i, name) in NAMES.iter().enumerate() {
         apfn(&["sweep", f, "--job", &i.to_string()]).unwrap_or_else(|e| panic!("--job {i}: {e:#}"));
-        let path = jobs_dir.join(format!("{}.json", NAMES[i]));
+        let path = jobs_dir.join(format!("{}.json", name));
         let job: serde_json::Value = serde_json::from_str(
             &std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("--job {i} must write {path:?}: {e}")),
         )

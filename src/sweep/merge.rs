@@ -49,7 +49,7 @@ pub fn collect(
     let mut missing = Vec::new();
     for job in jobs {
         match job_status(sweep, out, job)? {
-            JobStatus::Done(result) => results.push(result),
+            JobStatus::Done(result) => results.push(*result),
             JobStatus::Missing => missing.push(job.name.clone()),
             JobStatus::Stale => missing.push(format!("{} (stale: its inputs changed)", job.name)),
         }

@@ -29,7 +29,7 @@ pub enum JobStatus {
     Missing,
     /// A result exists but was computed from other inputs (the schedule or settings changed).
     Stale,
-    Done(JobResult),
+    Done(Box<JobResult>),
 }
 
 /// `<out>/jobs/<name>.json`.
@@ -69,7 +69,7 @@ pub fn job_status(sweep: &LoadedSweep, out: &Path, job: &Job) -> Result<JobStatu
         });
     }
     Ok(if result.fingerprint == fingerprint(sweep, job)? {
-        JobStatus::Done(result)
+        JobStatus::Done(Box::new(result))
     } else {
         JobStatus::Stale
     })
