@@ -2,7 +2,9 @@
 //!
 //! The stages, in dataflow order: the `world` (maps, robots), `sense` (LiDAR, occupancy grid,
 //! depth, odometry), `particles` (the filter), `agent` (policies), `act` (drive and physics),
-//! then `episode` bookkeeping; `compose` turns RON files into schedules; `cli` is the binary's.
+//! then `episode` bookkeeping; `compose` turns RON files into schedules; `eval` writes results
+//! tables and `sweep` repeats them across seeds as independent jobs; `replay` runs the filter
+//! on recorded logs; `cli` is the binary's.
 
 // Systems state their inputs as query tuples; naming each tuple would hide what a system reads.
 #![allow(clippy::type_complexity)]
@@ -22,6 +24,8 @@ pub mod episode;
 pub mod compose;
 
 pub mod eval;
+
+pub mod sweep;
 
 pub mod replay;
 

@@ -105,8 +105,8 @@ mod tests {
     use super::*;
     use crate::testing::tiny_room;
     use crate::world::Cell;
-    use image::Rgb;
     use clap::Parser;
+    use image::Rgb;
 
     #[derive(Parser)]
     struct Cli {

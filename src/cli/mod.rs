@@ -5,6 +5,7 @@ pub mod localize;
 pub mod map;
 pub mod record;
 pub mod run;
+pub mod sweep;
 pub mod systems;
 
 use clap::{Parser, Subcommand};
@@ -30,6 +31,8 @@ pub enum Command {
     Record(record::RecordArgs),
     /// Run the particle filter on a recorded log and a ROS map; write one estimate per line.
     Localize(localize::LocalizeArgs),
+    /// Run an eval config for many seeds as independent jobs; merge to mean ± 95 % CI tables.
+    Sweep(sweep::SweepArgs),
     /// List the registered systems with their parameters.
     #[command(subcommand)]
     Systems(systems::SystemsCommand),
@@ -43,6 +46,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval(args) => eval::run(args),
         Command::Record(args) => record::run(args),
         Command::Localize(args) => localize::run(args),
+        Command::Sweep(args) => sweep::run(args),
         Command::Systems(cmd) => systems::run(cmd),
     }
 }

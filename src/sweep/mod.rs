@@ -1,0 +1,18 @@
+//! Sweeps: an eval config × seeds, split into independent, deterministic jobs (one cell, one
+//! seed, one result file each) that any engine can run, then merged into mean ± 95 % CI tables.
+
+mod config;
+mod error;
+mod jobs;
+mod merge;
+mod result;
+mod stats;
+mod table;
+
+pub use config::{LoadedSweep, SweepConfig};
+pub use error::SweepError;
+pub use jobs::{Job, job_at, job_steps, jobs, list_lines, run_job};
+pub use merge::{SweepRow, collect, merge};
+pub use result::{JobResult, JobStatus, job_path, job_status, write_job_result};
+pub use stats::{MeanCi, mean_ci, t975};
+pub use table::{csv, markdown, write_sweep};

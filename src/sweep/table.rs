@@ -1,0 +1,99 @@
+//! Writes a merged sweep: sweep.json (rows), sweep.csv (one `_mean` and one `_ci95` column per
+//! metric) and sweep.md (one line per cell, "mean ± half-width").
+
+use crate::eval::task_name;
+use crate::sweep::error::SweepError;
+use crate::sweep::merge::SweepRow;
+use crate::sweep::stats::MeanCi;
+use crate::world::map::write_atomically;
+use std::path::Path;
+
+/// The metrics of a row, with their column names, in table order.
+fn metrics(r: &SweepRow) -> [(&'static str, MeanCi); 6] {
+    [
+        ("mean_pos_err_m", r.mean_pos_err_m),
+        ("rmse_pos_m", r.rmse_pos_m),
+        ("final_pos_err_m", r.final_pos_err_m),
+        ("mean_orient_err_rad", r.mean_orient_err_rad),
+        ("final_orient_err_rad", r.final_orient_err_rad),
+        ("success_rate", r.success_rate),
+    ]
+}
+
+/// Writes the three files atomically into `out`.
+pub fn write_sweep(out: &Path, rows: &[SweepRow]) -> Result<(), SweepError> {
+    std::fs::create_dir_all(out).map_err(|source| SweepError::Read { path: out.to_owned(), source })?;
+    let json = serde_json::to_string_pretty(rows).map_err(|e| SweepError::JobFile {
+        path: out.join("sweep.json"),
+        message: format!("cannot encode the merged rows: {e}"),
+    })?;
+    write_atomically(&out.join("sweep.json"), json.as_bytes())?;
+    write_atomically(&out.join("sweep.csv"), csv(rows).as_bytes())?;
+    write_atomically(&out.join("sweep.md"), markdown(rows).as_bytes())?;
+    Ok(())
+}
+
+/// One line per cell; an interval is empty with a single seed.
+pub fn csv(rows: &[SweepRow]) -> String {
+    let mut text = "schedule,localizer,policy,task,split,map,particles,episodes,n,seeds".to_owned();
+    if let Some(r) = rows.first() {
+        for (name, _) in metrics(r) {
+            text += &format!(",{name}_mean,{name}_ci95");
+        }
+    }
+    text += ",wall_s\n";
+    for r in rows {
+        let seeds: Vec<String> = r.seeds.iter().map(u64::to_string).collect();
+        text += &format!(
+            "{},{},{},{},{},\"{}\",{},{},{},\"{}\"",
+            r.schedule,
+            r.localizer,
+            r.policy,
+            task_name(r.task),
+            r.split,
+            r.map,
+            r.particles,
+            r.episodes,
+            r.n,
+            seeds.join(" ")
+        );
+        for (_, m) in metrics(r) {
+            text += &format!(",{:.5},{}", m.mean, m.ci95.map_or(String::new(), |c| format!("{c:.5}")));
+        }
+        text += &format!(",{:.1}\n", r.wall_s);
+    }
+    text
+}
+
+/// "mean ± half-width" scaled by `scale`, or just the mean with one seed.
+fn cell(m: MeanCi, scale: f64, decimals: usize) -> String {
+    match m.ci95 {
+        Some(ci) => format!("{:.*} ± {:.*}", decimals, m.mean * scale, decimals, ci * scale),
+        None => format!("{:.*}", decimals, m.mean * scale),
+    }
+}
+
+pub fn markdown(rows: &[SweepRow]) -> String {
+    let mut text = String::from(
+        "Mean across seeds ± half-width of its 95 % confidence interval (Student t, n − 1 degrees of \
+         freedom). Errors are averaged over all steps of all episodes.\n\n\
+         | schedule | localizer | policy | task | split | n | pos err (cm) | final pos err (cm) | \
+         orient err (rad) | success (%) |\n|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        text += &format!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            r.schedule,
+            r.localizer,
+            r.policy,
+            task_name(r.task),
+            r.split,
+            r.n,
+            cell(r.mean_pos_err_m, 100.0, 1),
+            cell(r.final_pos_err_m, 100.0, 1),
+            cell(r.mean_orient_err_rad, 1.0, 3),
+            cell(r.success_rate, 100.0, 0),
+        );
+    }
+    text
+}
