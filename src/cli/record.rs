@@ -13,7 +13,7 @@
 //! Episodes never reset while recording (the episode length is raised above `--steps`): a reset
 //! teleports the robot, which no odometry could explain.
 
-use crate::cli::run::{load_pipeline, load_scene};
+use crate::cli::run::SceneArgs;
 use crate::compose::{LoadedScene, MapName, Pipeline};
 use crate::plugin::headless_app;
 use crate::replay::{LogLine, to_jsonl};
@@ -26,13 +26,9 @@ use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct RecordArgs {
-    /// Scene file (scenes/*.ron). Default: the embedded procedural-apartment scene.
-    #[arg(long)]
-    pub scene: Option<PathBuf>,
-    /// Schedule file (systems/*.ron); it must run `odometry` and `lidar`. Default: the scene's
-    /// `systems`, else the embedded random-policy schedule.
-    #[arg(long)]
-    pub systems: Option<PathBuf>,
+    /// The schedule must run `odometry` and `lidar`.
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// Agent steps to record: one log line each.
     #[arg(long, default_value_t = 200)]
     pub steps: u64,
@@ -59,8 +55,7 @@ pub struct Recording {
 }
 
 pub fn run(args: RecordArgs) -> anyhow::Result<()> {
-    let loaded = load_scene(args.scene.as_deref())?;
-    let pipeline = load_pipeline(args.systems.as_deref(), &loaded)?;
+    let (loaded, pipeline) = args.input.load()?;
     let bar = ProgressBar::new(args.steps).with_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {per_sec}, eta {eta}")
             .expect("static progress template"),

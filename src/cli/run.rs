@@ -26,12 +26,8 @@ pub const DEFAULT_SYSTEMS: (&str, &str) = ("systems/random.ron", include_str!(".
 
 #[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct RunArgs {
-    /// Scene file (scenes/*.ron). Default: the embedded procedural-apartment scene.
-    #[arg(long)]
-    pub scene: Option<PathBuf>,
-    /// Schedule file (systems/*.ron). Default: the scene's `systems`, else the embedded random-policy schedule.
-    #[arg(long)]
-    pub systems: Option<PathBuf>,
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// Agent steps to simulate (each robot moves once per step).
     #[arg(long, default_value_t = 200)]
     pub steps: u64,
@@ -44,6 +40,27 @@ pub struct RunArgs {
     /// Worker threads (default: all cores); results do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
+}
+
+/// Which scene and schedule to simulate; shared by the subcommands that simulate.
+#[derive(clap::Args, Clone, Debug, PartialEq)]
+pub struct SceneArgs {
+    /// Scene file (scenes/*.ron). Default: the embedded procedural-apartment scene.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Schedule file (systems/*.ron). Default: the scene's `systems`, else the embedded
+    /// random-policy schedule.
+    #[arg(long)]
+    pub systems: Option<PathBuf>,
+}
+
+impl SceneArgs {
+    /// The scene and its schedule, loaded and validated.
+    pub fn load(&self) -> anyhow::Result<(LoadedScene, Pipeline)> {
+        let loaded = load_scene(self.scene.as_deref())?;
+        let pipeline = load_pipeline(self.systems.as_deref(), &loaded)?;
+        Ok((loaded, pipeline))
+    }
 }
 
 /// One robot at one step, as written to trajectories.jsonl.
@@ -84,8 +101,7 @@ pub struct RunSummary {
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     set_threads(args.threads)?;
     anyhow::ensure!(args.worlds > 0, "--worlds: expected at least 1 world");
-    let loaded = load_scene(args.scene.as_deref())?;
-    let pipeline = load_pipeline(args.systems.as_deref(), &loaded)?;
+    let (loaded, pipeline) = args.input.load()?;
     let robots_per_world = loaded.maps.len() * loaded.scene.robots_per_map;
 
     let bar = ProgressBar::new(args.steps * args.worlds).with_style(

@@ -1,6 +1,7 @@
 //! Errors of composition: schedule and scene files, with the file, the place and what was expected.
 
-use std::path::PathBuf;
+use serde::de::DeserializeOwned;
+use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ComposeError {
@@ -29,4 +30,16 @@ impl ComposeError {
             message: err.code.to_string(),
         }
     }
+}
+
+/// Reads a RON file into `T`; errors name the file, and the line and column for syntax and type
+/// errors.
+pub fn read_ron<T: DeserializeOwned>(path: &Path) -> Result<T, ComposeError> {
+    let text = read_text(path)?;
+    ron::Options::default().from_str(&text).map_err(|e| ComposeError::from_ron(path, e))
+}
+
+/// Reads a text file, naming it in the error.
+pub fn read_text(path: &Path) -> Result<String, ComposeError> {
+    std::fs::read_to_string(path).map_err(|source| ComposeError::Read { path: path.to_owned(), source })
 }

@@ -9,7 +9,7 @@ mod schedule;
 mod spawn;
 
 pub use catalog::standard_registry;
-pub use error::ComposeError;
+pub use error::{ComposeError, read_ron, read_text};
 pub use registry::{ConfiguredSystem, NoParams, RegisteredSystem, Registry, StepSlot, SystemSpec};
 pub use scene::{LoadedScene, MapSource, NamedMap, Scene};
 pub use schedule::{Pipeline, PipelineStep};

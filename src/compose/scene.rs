@@ -6,7 +6,7 @@
 //! ```
 
 use crate::act::PhysicsParams;
-use crate::compose::error::ComposeError;
+use crate::compose::error::{ComposeError, read_ron};
 use crate::episode::EpisodeParams;
 use crate::world::map::load_ros_map;
 use crate::world::map::procedural::{ApartmentParams, Split, generate_apartment};
@@ -84,11 +84,7 @@ pub struct LoadedScene {
 impl Scene {
     /// Reads, validates and loads a scene file and its maps.
     pub fn load(path: &Path) -> Result<LoadedScene, ComposeError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ComposeError::Read { path: path.to_owned(), source })?;
-        let scene: Scene =
-            ron::Options::default().from_str(&text).map_err(|e| ComposeError::from_ron(path, e))?;
-        scene.into_loaded(path)
+        read_ron::<Scene>(path)?.into_loaded(path)
     }
 
     /// Validates an in-code scene and loads its maps; `path` labels errors and anchors relative paths.

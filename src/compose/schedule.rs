@@ -5,7 +5,7 @@
 //! Schedule(steps: [("odometry", (trans_noise_m: 0.01)), ("lidar", ()), ("random_policy", ())])
 //! ```
 
-use crate::compose::error::ComposeError;
+use crate::compose::error::{ComposeError, read_text};
 use crate::compose::registry::{ConfiguredSystem, Registry, StepSlot, chain_slots};
 use crate::plugin::ApfnSet;
 use bevy::prelude::*;
@@ -36,9 +36,7 @@ pub struct Pipeline {
 impl Pipeline {
     /// Reads and validates a schedule file.
     pub fn load(path: &Path, registry: &Registry) -> Result<Pipeline, ComposeError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ComposeError::Read { path: path.to_owned(), source })?;
-        Self::parse(&text, path, registry)
+        Self::parse(&read_text(path)?, path, registry)
     }
 
     /// Decodes schedule text; `path` only labels errors.

@@ -10,7 +10,7 @@
 //! )
 //! ```
 
-use crate::compose::{ComposeError, MapSource, Pipeline, Scene, standard_registry};
+use crate::compose::{ComposeError, MapSource, Pipeline, Scene, read_ron, standard_registry};
 use crate::episode::EpisodeParams;
 use crate::particles::Task;
 use crate::world::RobotParams;
@@ -121,11 +121,7 @@ impl EvalConfig {
     /// Reads a config and loads every schedule and map it names, so that a typo fails in
     /// seconds rather than after hours of episodes.
     pub fn load(path: &Path) -> Result<LoadedEval, ComposeError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ComposeError::Read { path: path.to_owned(), source })?;
-        let config: EvalConfig =
-            ron::Options::default().from_str(&text).map_err(|e| ComposeError::from_ron(path, e))?;
-        config.into_loaded(path)
+        read_ron::<EvalConfig>(path)?.into_loaded(path)
     }
 
     pub fn into_loaded(self, path: &Path) -> Result<LoadedEval, ComposeError> {

@@ -17,6 +17,7 @@
 //! `eval.seed` is ignored: each job runs with one of `seeds`. `out` is relative to this file
 //! (`apfn sweep --out DIR` overrides it).
 
+use crate::compose::read_ron;
 use crate::eval::{EvalConfig, LoadedEval};
 use crate::sweep::error::SweepError;
 use serde::{Deserialize, Serialize};
@@ -46,15 +47,7 @@ pub struct LoadedSweep {
 impl SweepConfig {
     /// Reads a sweep file and loads everything it names, so that a typo fails in seconds.
     pub fn load(path: &Path) -> Result<LoadedSweep, SweepError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| SweepError::Read { path: path.to_owned(), source })?;
-        let config: SweepConfig = ron::Options::default().from_str(&text).map_err(|e| SweepError::Parse {
-            path: path.to_owned(),
-            line: e.span.start.line,
-            col: e.span.start.col,
-            message: e.code.to_string(),
-        })?;
-        config.into_loaded(path)
+        read_ron::<SweepConfig>(path)?.into_loaded(path)
     }
 
     /// Validates an in-code sweep; `path` labels errors and anchors relative paths.

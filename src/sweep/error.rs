@@ -10,10 +10,6 @@ pub enum SweepError {
     #[error("cannot read {path}: {source}")]
     Read { path: PathBuf, source: std::io::Error },
 
-    /// A RON syntax or type error in the sweep file; `line` and `col` are 1-based.
-    #[error("{path}:{line}:{col}: {message}")]
-    Parse { path: PathBuf, line: usize, col: usize, message: String },
-
     /// The sweep file parsed but asks for something impossible (no seeds, colliding job names…).
     #[error("{path}: field `{field}`: {message}")]
     Invalid { path: PathBuf, field: String, message: String },
