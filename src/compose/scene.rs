@@ -22,7 +22,8 @@ pub struct Scene {
     /// Robots spawned on every map (batched through every system in one pass).
     #[serde(default = "one")]
     pub robots_per_map: usize,
-    /// Whether robots sharing a map are obstacles to each other's bodies.
+    /// Whether robots sharing a map are obstacles to each other's bodies (their LiDARs see each
+    /// other when the schedule's `lidar` step sets `robots_block: true`).
     #[serde(default)]
     pub robots_collide: bool,
     /// Root of every random stream of the run.
