@@ -90,7 +90,7 @@ pub fn run(steps: usize) -> Vec<f32> {
         robots_per_map: 1,
         robots_collide: false,
         seed: 4,
-        episode: EpisodeParams { steps: steps as u32 + 1 },
+        episode: EpisodeParams { steps: steps as u32 + 1, ..Default::default() },
         robot: Default::default(),
         physics: Default::default(),
         systems: None,

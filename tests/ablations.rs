@@ -29,7 +29,7 @@ fn run(
         robots_per_map: 4,
         particles,
         seed,
-        episode: apfn::episode::EpisodeParams { steps },
+        episode: apfn::episode::EpisodeParams { steps, ..Default::default() },
         robot: Default::default(),
     };
     let eval = config.into_loaded(Path::new("tests/ablations.ron")).unwrap_or_else(|e| panic!("{e}"));

@@ -25,7 +25,7 @@ fn small_scene() -> Scene {
         robots_per_map: 2,
         robots_collide: false,
         seed: 11,
-        episode: apfn::episode::EpisodeParams { steps: 5 },
+        episode: apfn::episode::EpisodeParams { steps: 5, ..Default::default() },
         robot: Default::default(),
         physics: Default::default(),
         systems: None,

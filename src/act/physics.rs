@@ -64,20 +64,33 @@ impl MapPhysics {
         Self(world)
     }
 
-    /// Adds a robot disc at `pose`. It never sleeps (a sleeping body ignores new velocities)
-    /// and slides along walls (zero friction).
+    /// Adds a robot disc at `pose`. It slides along walls (zero friction).
     pub fn add_robot(&mut self, pose: Pose2, radius_m: f32, collide_with_robots: bool) -> PhysicsBody {
+        let filter = if collide_with_robots { WALLS | ROBOTS } else { WALLS };
+        let collider = ColliderBuilder::ball(radius_m)
+            .friction(0.0)
+            .friction_combine_rule(CoefficientCombineRule::Min)
+            .collision_groups(InteractionGroups::new(ROBOTS, filter, InteractionTestMode::And))
+            .build();
+        self.insert_robot(pose, collider)
+    }
+
+    /// Moves a robot's body out of this world into `to`, at `pose` and at rest (episodes that
+    /// change maps); returns its handles there.
+    pub fn transfer(&mut self, robot: PhysicsBody, to: &mut MapPhysics, pose: Pose2) -> PhysicsBody {
+        let collider = self.0.colliders[robot.collider].clone();
+        self.0.remove_body(robot.body);
+        to.insert_robot(pose, collider)
+    }
+
+    /// A dynamic body carrying `collider`. It never sleeps: a sleeping body ignores new velocities.
+    fn insert_robot(&mut self, pose: Pose2, collider: Collider) -> PhysicsBody {
         let body = RigidBodyBuilder::dynamic()
             .pose(Pose::new(Vector::new(pose.x, pose.y), pose.yaw))
             .gravity_scale(0.0)
             .can_sleep(false)
             .build();
         let body = self.0.insert_body(body);
-        let filter = if collide_with_robots { WALLS | ROBOTS } else { WALLS };
-        let collider = ColliderBuilder::ball(radius_m)
-            .friction(0.0)
-            .friction_combine_rule(CoefficientCombineRule::Min)
-            .collision_groups(InteractionGroups::new(ROBOTS, filter, InteractionTestMode::And));
         let collider = self.0.insert_collider(collider, Some(body));
         PhysicsBody { body, collider }
     }
@@ -246,6 +259,22 @@ mod tests {
         let (mut world, robot) = world_with_robot(Pose2::new(0.4, 0.1 + 0.18 + 0.05, 0.0), command);
         world.run_system_once(physics).unwrap();
         assert!(!world.get::<Collided>(robot).unwrap().0, "a pass 5 cm from the wall is no collision");
+    }
+
+    #[test]
+    fn physics_transfer_moves_a_robot_between_worlds() {
+        let map = tiny_room();
+        let (mut a, mut b) = (MapPhysics::from_map(&map, 0.1), MapPhysics::from_map(&map, 0.1));
+        let robot = a.add_robot(Pose2::new(0.5, 0.5, 0.0), 0.18, false);
+        let walls = a.0.colliders.len() - 1;
+        let target = Pose2::new(1.0, 0.8, 1.0);
+        let moved = a.transfer(robot, &mut b, target);
+        assert_eq!(a.0.colliders.len(), walls, "only the walls stay in world a");
+        assert_eq!(b.0.bodies.len(), 1, "the body arrived in world b");
+        assert!(b.pose(moved).distance(&target) < 1e-5, "at the requested pose");
+        let command = DriveCommand { linear_mps: 0.5, angular_radps: 0.0 };
+        let [(pose, _)] = b.step_robots(&[(moved, command)], 6)[..] else { panic!("one robot") };
+        assert!(pose.distance(&target) > 0.2, "the moved robot drives in its new world");
     }
 
     #[test]

@@ -206,7 +206,7 @@ mod tests {
     #[test]
     fn step_metrics_logs_and_completes_episodes() {
         let mut world = World::new();
-        world.insert_resource(EpisodeParams { steps: 2 });
+        world.insert_resource(EpisodeParams { steps: 2, ..default() });
         world.init_resource::<CompletedEpisodes>();
         let truth = Pose2::new(1.0, 1.0, 0.0);
         let robot = world

@@ -5,6 +5,7 @@ use crate::particles::ParticleSet;
 use crate::world::map::TraversableMap;
 use crate::world::{EpisodeRng, OccupancyMap, OnMap, PreviousPose, TruePose};
 use bevy::prelude::*;
+use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 /// Episode length (paper: T = 50 agent steps for RL and evaluation).
@@ -13,11 +14,14 @@ use serde::{Deserialize, Serialize};
 pub struct EpisodeParams {
     /// Agent steps per episode.
     pub steps: u32,
+    /// In scenes with several maps, start each new episode on a map drawn at random (the
+    /// reference samples a new apartment per episode); otherwise robots keep their map.
+    pub change_maps: bool,
 }
 
 impl Default for EpisodeParams {
     fn default() -> Self {
-        Self { steps: 50 }
+        Self { steps: 50, change_maps: true }
     }
 }
 
@@ -39,24 +43,43 @@ pub struct EpisodeStart;
 pub fn episode_reset(
     params: Res<EpisodeParams>,
     mut commands: Commands,
-    mut maps: Query<(&OccupancyMap, &TraversableMap, &mut MapPhysics)>,
+    mut maps: Query<(Entity, &OccupancyMap, &TraversableMap, &mut MapPhysics)>,
     mut robots: Query<(
         Entity,
-        &OnMap,
-        &PhysicsBody,
+        &mut OnMap,
+        &mut PhysicsBody,
         &mut Episode,
-        &mut TruePose,
-        &mut PreviousPose,
+        (&mut TruePose, &mut PreviousPose),
         &mut EpisodeRng,
         Option<&mut ParticleSet>,
     )>,
 ) {
-    for (robot, on_map, body, mut episode, mut pose, mut previous, mut rng, particles) in &mut robots {
+    let map_entities: Vec<Entity> = maps.iter().map(|(entity, ..)| entity).collect();
+    for (robot, mut on_map, mut body, mut episode, (mut pose, mut previous), mut rng, particles) in
+        &mut robots
+    {
         commands.entity(robot).remove::<EpisodeStart>();
         if episode.step >= params.steps {
-            let Ok((map, traversable, mut physics)) = maps.get_mut(on_map.0) else { continue };
-            let start = traversable.sample_pose(map, &mut rng.0);
-            physics.teleport(*body, start);
+            let next_map = match map_entities.len() {
+                n if params.change_maps && n > 1 => map_entities[rng.0.random_range(0..n)],
+                _ => on_map.0,
+            };
+            let start = if next_map == on_map.0 {
+                let Ok((_, map, traversable, mut physics)) = maps.get_mut(on_map.0) else { continue };
+                let start = traversable.sample_pose(map, &mut rng.0);
+                physics.teleport(*body, start);
+                start
+            } else {
+                let Ok([(.., mut from), (_, map, traversable, mut to)]) =
+                    maps.get_many_mut([on_map.0, next_map])
+                else {
+                    continue;
+                };
+                let start = traversable.sample_pose(map, &mut rng.0);
+                *body = from.transfer(*body, &mut to, start);
+                on_map.0 = next_map;
+                start
+            };
             (pose.0, previous.0) = (start, start);
             *episode = Episode { index: episode.index + 1, step: 0 };
             if let Some(mut particles) = particles {
@@ -85,7 +108,7 @@ mod tests {
         let start = Pose2::new(0.5, 0.5, 0.0);
         let body = physics.add_robot(start, 0.18, false);
         let mut world = World::new();
-        world.insert_resource(EpisodeParams { steps: 2 });
+        world.insert_resource(EpisodeParams { steps: 2, change_maps: true });
         let map_entity = world.spawn((map, traversable, physics)).id();
         let robot = world
             .spawn((
@@ -114,5 +137,42 @@ mod tests {
         let pose = world.get::<TruePose>(robot).unwrap().0;
         assert_ne!(pose, start, "a new random start pose");
         assert_eq!(world.get::<PreviousPose>(robot).unwrap().0, pose, "odometry must not see the teleport");
+    }
+
+    #[test]
+    fn episode_reset_moves_robots_between_maps() {
+        let map = tiny_room();
+        let mut world = World::new();
+        world.insert_resource(EpisodeParams { steps: 1, change_maps: true });
+        let mut maps = Vec::new();
+        for _ in 0..2 {
+            let traversable = TraversableMap::build(&map, 0.18).unwrap();
+            maps.push(world.spawn((map.clone(), traversable, MapPhysics::from_map(&map, 0.1))).id());
+        }
+        let start = Pose2::new(0.5, 0.5, 0.0);
+        let body = world.get_mut::<MapPhysics>(maps[0]).unwrap().add_robot(start, 0.18, false);
+        let robot = world
+            .spawn((
+                OnMap(maps[0]),
+                body,
+                Episode::default(),
+                TruePose(start),
+                PreviousPose(start),
+                EpisodeRng::seeded(3),
+            ))
+            .id();
+        let mut visited = std::collections::HashSet::new();
+        for _ in 0..20 {
+            world.run_system_once(episode_reset).unwrap();
+            let on_map = world.get::<OnMap>(robot).unwrap().0;
+            visited.insert(on_map);
+            let body = *world.get::<PhysicsBody>(robot).unwrap();
+            let pose = world.get::<TruePose>(robot).unwrap().0;
+            let physics = world.get::<MapPhysics>(on_map).unwrap();
+            assert!(physics.pose(body).distance(&pose) < 1e-4, "the body lives in the robot's current map");
+        }
+        assert_eq!(visited.len(), 2, "20 one-step episodes must visit both maps");
+        let bodies: usize = maps.iter().map(|&m| world.get::<MapPhysics>(m).unwrap().0.bodies.len()).sum();
+        assert_eq!(bodies, 1, "the robot has exactly one body across all worlds");
     }
 }
