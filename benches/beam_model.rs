@@ -5,7 +5,8 @@
 //! most that many (the count used is printed).
 
 use apfn::particles::{
-    BeamModelParams, LikelihoodFieldParams, ParticleSet, beam_readings, weigh_beam_model, weigh_likelihood_field,
+    BeamModelParams, LikelihoodFieldParams, ParticleSet, beam_readings, weigh_beam_model,
+    weigh_likelihood_field,
 };
 use apfn::sense::{LidarParams, LidarScan, RayGrid, cast_scan};
 use apfn::world::map::DistanceField;
@@ -54,7 +55,9 @@ fn bench(c: &mut Criterion) {
     });
     group.bench_function("likelihood_field_300_particles_x_60_beams", |b| {
         let mut set = ParticleSet::from_poses(&poses);
-        b.iter(|| black_box(weigh_likelihood_field(&mut set, &scan, &field, &map.origin, &field_params)).is_ok())
+        b.iter(|| {
+            black_box(weigh_likelihood_field(&mut set, &scan, &field, &map.origin, &field_params)).is_ok()
+        })
     });
     group.finish();
 }

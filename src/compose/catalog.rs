@@ -8,8 +8,8 @@ use crate::agent::{
 use crate::compose::registry::{NoParams, Registry, SystemSpec};
 use crate::episode::{KidnapParams, episode_reset, kidnap, step_metrics};
 use crate::particles::{
-    BeamModelParams, InitParams, LikelihoodFieldParams, RecoveryParams, ResampleParams, TransitionParams, augmented_recovery,
-    estimate, init_particles, mcl_beam_model, mcl_likelihood_field, resample, transition,
+    BeamModelParams, InitParams, LikelihoodFieldParams, RecoveryParams, ResampleParams, TransitionParams,
+    augmented_recovery, estimate, init_particles, mcl_beam_model, mcl_likelihood_field, resample, transition,
 };
 use crate::plugin::ApfnSet::{self, *};
 use crate::sense::{

@@ -147,3 +147,29 @@ pub fn run_cell(eval: &LoadedEval, cell: &CellSpec, on_step: impl Fn()) -> Resul
     };
     Ok(CellOutcome { row, records, maps })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compose::standard_registry;
+    use std::path::Path;
+
+    #[test]
+    fn labels_name_the_likelihood_model() {
+        let registry = standard_registry();
+        let label = |step: &str| {
+            let text = format!(
+                r#"Schedule(steps: [("lidar", ()), ("init_particles", ()), ("{step}", ()), ("random_policy", ())])"#
+            );
+            let pipeline =
+                Pipeline::parse(&text, Path::new("inline.ron"), &registry).expect("valid schedule");
+            labels(&pipeline)
+        };
+        assert_eq!(label("mcl_likelihood_field"), ("mcl".into(), "random".into()));
+        assert_eq!(
+            label("mcl_beam_model"),
+            ("mcl_beam".into(), "random".into()),
+            "beam model is not plain mcl"
+        );
+    }
+}

@@ -72,7 +72,11 @@ impl Default for BeamModelParams {
 pub fn beam_probability(z: f32, z_star: f32, range_max_m: f32, params: &BeamModelParams) -> f32 {
     let d = z - z_star;
     let hit = params.z_hit * (-d * d / (2.0 * params.sigma_hit * params.sigma_hit)).exp();
-    let short = if z < z_star { params.z_short * params.lambda_short * (-params.lambda_short * z).exp() } else { 0.0 };
+    let short = if z < z_star {
+        params.z_short * params.lambda_short * (-params.lambda_short * z).exp()
+    } else {
+        0.0
+    };
     let max_or_rand = if z >= range_max_m { params.z_max } else { params.z_rand / range_max_m };
     hit + short + max_or_rand
 }
@@ -102,7 +106,10 @@ pub fn add_log_beam_likelihoods(
     }
     let range_max = scan.range_max_m;
     if !(range_max > 0.0 && range_max.is_finite()) {
-        return Err(ParticleError::InvalidParam { field: "LidarScan.range_max_m", expected: "a range > 0 m" });
+        return Err(ParticleError::InvalidParam {
+            field: "LidarScan.range_max_m",
+            expected: "a range > 0 m",
+        });
     }
     let beams = beam_readings(scan, params.max_beams);
     let ParticleSet { x, y, yaw, log_w } = set;
@@ -216,7 +223,10 @@ mod tests {
             0.05f32.ln()
         );
         let agrees = log_likelihood(pose, &one_beam(1.0, 1.0), &grid, &params);
-        assert!((agrees - 0.55f32.ln()).abs() < 1e-4, "max reading, map agrees: log(z_hit + z_max), got {agrees}");
+        assert!(
+            (agrees - 0.55f32.ln()).abs() < 1e-4,
+            "max reading, map agrees: log(z_hit + z_max), got {agrees}"
+        );
         let beyond = log_likelihood(pose, &one_beam(f32::INFINITY, 1.0), &grid, &params);
         assert_eq!(beyond, agrees, "+inf counts as a max-range reading");
         let no_z_max = BeamModelParams { z_max: 0.0, ..params };
@@ -236,9 +246,16 @@ mod tests {
         scan.angle_increment_rad = std::f32::consts::FRAC_PI_2;
         let got = log_likelihood(pose, &scan, &grid, &params);
         let expected = beam_probability(1.2, grid.cast(0.5, 0.5, 0.0, 5.6), 5.6, &params).ln();
-        assert!(got.is_finite() && (got - expected).abs() < 1e-6, "NaN beams add nothing: {got} vs {expected}");
+        assert!(
+            got.is_finite() && (got - expected).abs() < 1e-6,
+            "NaN beams add nothing: {got} vs {expected}"
+        );
         scan.ranges_m = vec![f32::NAN; 3];
-        assert_eq!(log_likelihood(pose, &scan, &grid, &params), 0.0, "an all-NaN scan leaves the weight alone");
+        assert_eq!(
+            log_likelihood(pose, &scan, &grid, &params),
+            0.0,
+            "an all-NaN scan leaves the weight alone"
+        );
     }
 
     #[test]

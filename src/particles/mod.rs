@@ -20,8 +20,8 @@ pub use beam_model::{
 pub use estimate::{PoseEstimate, estimate, estimate_pose};
 pub use init::{InitParams, Initialised, Task, draw_initial_set, init_particles};
 pub use likelihood_field::{
-    LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices, selected_beams,
-    mcl_likelihood_field, weigh_likelihood_field,
+    LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,
+    mcl_likelihood_field, selected_beams, weigh_likelihood_field,
 };
 pub use recovery::{
     RecoveryParams, RecoveryState, augmented_recovery, inject_uniform, recover, update_averages,
