@@ -8,8 +8,8 @@ use crate::agent::{
 use crate::compose::registry::{NoParams, Registry, SystemSpec};
 use crate::episode::{KidnapParams, episode_reset, kidnap, step_metrics};
 use crate::particles::{
-    InitParams, LikelihoodFieldParams, RecoveryParams, ResampleParams, TransitionParams, augmented_recovery,
-    estimate, init_particles, mcl_likelihood_field, resample, transition,
+    BeamModelParams, InitParams, LikelihoodFieldParams, RecoveryParams, ResampleParams, TransitionParams,
+    augmented_recovery, estimate, init_particles, mcl_beam_model, mcl_likelihood_field, resample, transition,
 };
 use crate::plugin::ApfnSet::{self, *};
 use crate::sense::{
@@ -106,6 +106,16 @@ pub fn standard_registry() -> Registry {
             &["LikelihoodStats"],
         ),
         mcl_likelihood_field,
+    )
+    .register::<BeamModelParams, _, _>(
+        spec(
+            "mcl_beam_model",
+            Particles,
+            "Reads LidarScan, the map's RayGrid. Writes ParticleSet weights, LikelihoodStats.",
+            &["ParticleSet", "LidarScan"],
+            &["LikelihoodStats"],
+        ),
+        mcl_beam_model,
     )
     .register::<RecoveryParams, _, _>(
         spec(

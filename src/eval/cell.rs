@@ -59,14 +59,17 @@ pub fn cell_steps(eval: &LoadedEval, cell: &CellSpec) -> u64 {
 }
 
 /// The localizer and policy a schedule runs, for the table: the Particles-stage step that
-/// weighs particles against a sensor, and the Agent-stage policy, without its `_policy` suffix.
+/// weighs particles against a sensor (`mcl` for the likelihood field, `mcl_beam` for the beam
+/// model), and the Agent-stage policy, without its `_policy` suffix.
 pub fn labels(pipeline: &Pipeline) -> (String, String) {
     let policy = pipeline
         .steps
         .iter()
         .find(|s| s.stage == ApfnSet::Agent)
         .map_or("none".into(), |s| s.name.trim_end_matches("_policy").to_owned());
-    let localizer = match pipeline.names().iter().find(|n| n.ends_with("likelihood_field")) {
+    let is_likelihood = |n: &&&str| n.ends_with("likelihood_field") || n.ends_with("beam_model");
+    let localizer = match pipeline.names().iter().find(is_likelihood) {
+        Some(&"mcl_beam_model") => "mcl_beam".to_owned(),
         Some(name) if name.starts_with("mcl") => "mcl".to_owned(),
         Some(name) => name.to_string(),
         None => "odometry_only".to_owned(),
@@ -143,4 +146,30 @@ pub fn run_cell(eval: &LoadedEval, cell: &CellSpec, on_step: impl Fn()) -> Resul
         success_rate: m.success_rate,
     };
     Ok(CellOutcome { row, records, maps })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compose::standard_registry;
+    use std::path::Path;
+
+    #[test]
+    fn labels_name_the_likelihood_model() {
+        let registry = standard_registry();
+        let label = |step: &str| {
+            let text = format!(
+                r#"Schedule(steps: [("lidar", ()), ("init_particles", ()), ("{step}", ()), ("random_policy", ())])"#
+            );
+            let pipeline =
+                Pipeline::parse(&text, Path::new("inline.ron"), &registry).expect("valid schedule");
+            labels(&pipeline)
+        };
+        assert_eq!(label("mcl_likelihood_field"), ("mcl".into(), "random".into()));
+        assert_eq!(
+            label("mcl_beam_model"),
+            ("mcl_beam".into(), "random".into()),
+            "beam model is not plain mcl"
+        );
+    }
 }

@@ -50,7 +50,8 @@ pub fn task_name(task: Task) -> &'static str {
     }
 }
 
-/// One table per localizer: each cell "mean pos cm / mean orient rad (success %)".
+/// One table per localizer: each cell "mean pos cm / mean orient rad (success %)"; a policy row
+/// appears under a localizer only if that localizer ran it (missing task/split cells read "–").
 pub fn markdown(rows: &[ResultRow]) -> String {
     let unique = |f: &dyn Fn(&ResultRow) -> String| {
         let mut seen: Vec<String> = Vec::new();
@@ -77,6 +78,9 @@ pub fn markdown(rows: &[ResultRow]) -> String {
         }
         text += &format!("\n|---|{}\n", "---|".repeat(tasks.len() * splits.len()));
         for policy in unique(&|r| r.policy.clone()) {
+            if !rows.iter().any(|r| r.localizer == localizer && r.policy == policy) {
+                continue;
+            }
             text += &format!("| {policy} |");
             for task in &tasks {
                 for split in &splits {
@@ -101,4 +105,43 @@ pub fn markdown(rows: &[ResultRow]) -> String {
         }
     }
     text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(localizer: &str, policy: &str, task: Task) -> ResultRow {
+        ResultRow {
+            localizer: localizer.into(),
+            policy: policy.into(),
+            task,
+            split: "seen".into(),
+            map: "apartments 0..4".into(),
+            particles: 300,
+            episodes: 20,
+            seed: 1,
+            mean_pos_err_m: 0.1,
+            rmse_pos_m: 0.2,
+            final_pos_err_m: 0.1,
+            mean_orient_err_rad: 0.02,
+            final_orient_err_rad: 0.02,
+            success_rate: 1.0,
+        }
+    }
+
+    #[test]
+    fn markdown_lists_only_policies_a_localizer_ran() {
+        let rows = [
+            row("mcl", "random (a)", Task::Tracking),
+            row("mcl", "random (b)", Task::Tracking),
+            row("mcl_beam", "random", Task::Tracking),
+            row("mcl_beam", "random", Task::Global),
+        ];
+        let text = markdown(&rows);
+        let (mcl, beam) = text.split_once("### localizer: mcl_beam").expect("one table per localizer");
+        assert!(mcl.contains("| random (a) |") && !mcl.contains("| random |"), "mcl table:\n{mcl}");
+        assert!(beam.contains("| random |") && !beam.contains("random (a)"), "mcl_beam table:\n{beam}");
+        assert!(mcl.contains(" – |"), "a task the localizer did not run still reads –:\n{mcl}");
+    }
 }

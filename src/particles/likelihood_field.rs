@@ -8,7 +8,9 @@
 //! Σ log p is sharper, so keep `max_beams` moderate (nav2's 60) or lower `z_hit` if particles
 //! starve. The LiDAR is taken to sit at the robot centre, facing ahead.
 
-use crate::particles::set::{FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet};
+use crate::particles::set::{
+    FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet, record_observation,
+};
 use crate::sense::LidarScan;
 use crate::world::map::DistanceField;
 use crate::world::{OccupancyMap, OnMap, Pose2};
@@ -60,17 +62,23 @@ pub fn beam_indices(n: usize, max_beams: usize) -> Vec<usize> {
     }
 }
 
+/// The beams an observation model reads: [`beam_indices`] of the scan as (bearing in the robot
+/// frame, rad; measured range, m), unfiltered; each model decides what a reading means.
+pub fn selected_beams(scan: &LidarScan, max_beams: usize) -> impl Iterator<Item = (f32, f32)> + '_ {
+    beam_indices(scan.ranges_m.len(), max_beams)
+        .into_iter()
+        .map(|i| (scan.angle_min_rad + i as f32 * scan.angle_increment_rad, scan.ranges_m[i]))
+}
+
 /// Sub-sampled usable beams as endpoint offsets in the robot frame, in grid cells of `resolution_m`.
 /// Skips NaN/±∞ readings, readings at or beyond range_max (AMCL ignores max-range returns) and
 /// readings below range_min (AMCL maps them to max range).
 fn beam_offsets(scan: &LidarScan, max_beams: usize, resolution_m: f32) -> Vec<(f32, f32)> {
-    beam_indices(scan.ranges_m.len(), max_beams)
-        .into_iter()
-        .filter_map(|i| {
-            let r = scan.ranges_m[i];
-            let usable = r.is_finite() && r >= scan.range_min_m && r < scan.range_max_m;
-            let (s, c) = (scan.angle_min_rad + i as f32 * scan.angle_increment_rad).sin_cos();
-            usable.then(|| (r * c / resolution_m, r * s / resolution_m))
+    selected_beams(scan, max_beams)
+        .filter(|&(_, r)| r.is_finite() && r >= scan.range_min_m && r < scan.range_max_m)
+        .map(|(bearing, r)| {
+            let (s, c) = bearing.sin_cos();
+            (r * c / resolution_m, r * s / resolution_m)
         })
         .collect()
 }
@@ -145,9 +153,7 @@ pub fn add_log_likelihoods(
 }
 
 /// The full observation update: adds the log-likelihoods, then normalises through the guard
-/// (NaN particles dropped; if nothing usable is left, weights become uniform). Also returns
-/// log Σ_k w_k·p(z | x_k), the log of the weighted mean likelihood before normalisation (what
-/// augmented MCL averages); −∞ for an empty set or when every likelihood is 0.
+/// ([`ParticleSet::weigh_with`]); returns the guard's verdict and the log mean likelihood.
 pub fn weigh_likelihood_field(
     set: &mut ParticleSet,
     scan: &LidarScan,
@@ -155,13 +161,7 @@ pub fn weigh_likelihood_field(
     origin: &Pose2,
     params: &LikelihoodFieldParams,
 ) -> Result<(Guard, f32), ParticleError> {
-    if set.is_empty() {
-        return Ok((Guard::Clean, f32::NEG_INFINITY));
-    }
-    let log_total_before = set.log_total_weight();
-    add_log_likelihoods(set, scan, field, origin, params)?;
-    let mean_log_likelihood = set.log_total_weight() - log_total_before;
-    Ok((set.normalise_guarded(), mean_log_likelihood))
+    set.weigh_with(|set| add_log_likelihoods(set, scan, field, origin, params))
 }
 
 /// Reads LidarScan, OnMap → the map's OccupancyMap (origin) and DistanceField,
@@ -176,13 +176,8 @@ pub fn mcl_likelihood_field(
             tracing::warn!("mcl_likelihood_field: map {:?} has no OccupancyMap + DistanceField", on_map.0);
             continue;
         };
-        match weigh_likelihood_field(&mut set, scan, field, &map.origin, &params) {
-            Ok((guard, mean_log_likelihood)) => {
-                health.degeneracies += u32::from(guard == Guard::ResetToUniform);
-                *stats = LikelihoodStats { mean_log_likelihood, updates: stats.updates + 1 };
-            }
-            Err(e) => tracing::warn!("mcl_likelihood_field: {e}"),
-        }
+        let outcome = weigh_likelihood_field(&mut set, scan, field, &map.origin, &params);
+        record_observation("mcl_likelihood_field", outcome, &mut health, &mut stats);
     }
 }
 

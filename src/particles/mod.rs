@@ -1,8 +1,10 @@
 //! ② Particles: the particle set and the filter steps, in the order a step runs them:
-//! init (fills empty sets) → transition → likelihood_field → (augmented recovery) → resample →
+//! init (fills empty sets) → transition → likelihood_field or beam_model → (augmented recovery) →
+//! resample →
 //! estimate. Each step is a plain kernel over a `ParticleSet` plus a small system; weights are
 //! log-weights, Σ exp = 1.
 
+mod beam_model;
 mod estimate;
 mod init;
 mod likelihood_field;
@@ -11,15 +13,21 @@ mod resample;
 mod set;
 mod transition;
 
+pub use beam_model::{
+    BEAM_CHUNK, BeamModelParams, add_log_beam_likelihoods, beam_probability, beam_readings, mcl_beam_model,
+    weigh_beam_model,
+};
 pub use estimate::{PoseEstimate, estimate, estimate_pose};
 pub use init::{InitParams, Initialised, Task, draw_initial_set, init_particles};
 pub use likelihood_field::{
     LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,
-    mcl_likelihood_field, weigh_likelihood_field,
+    mcl_likelihood_field, selected_beams, weigh_likelihood_field,
 };
 pub use recovery::{
     RecoveryParams, RecoveryState, augmented_recovery, inject_uniform, recover, update_averages,
 };
 pub use resample::{ResampleParams, resample, resample_soft, should_resample, systematic_indices};
-pub use set::{Degenerate, FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet};
+pub use set::{
+    Degenerate, FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet, record_observation,
+};
 pub use transition::{TRANSITION_CHUNK, TransitionParams, propagate, transition};

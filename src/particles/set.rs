@@ -58,6 +58,23 @@ impl ParticleSet {
     }
 }
 
+/// Books the outcome of [`ParticleSet::weigh_with`] on the robot: a reset to uniform counts as a
+/// degeneracy, a success updates the stats, an error is logged under `system`'s name.
+pub fn record_observation(
+    system: &str,
+    outcome: Result<(Guard, f32), ParticleError>,
+    health: &mut FilterHealth,
+    stats: &mut LikelihoodStats,
+) {
+    match outcome {
+        Ok((guard, mean_log_likelihood)) => {
+            health.degeneracies += u32::from(guard == Guard::ResetToUniform);
+            *stats = LikelihoodStats { mean_log_likelihood, updates: stats.updates + 1 };
+        }
+        Err(e) => tracing::warn!("{system}: {e}"),
+    }
+}
+
 /// The weights cannot be normalised: a NaN/+∞ log-weight, or every weight is zero.
 #[derive(Error, Clone, Copy, Debug, PartialEq, Eq)]
 #[error("degenerate particle weights: {reason}")]
@@ -171,6 +188,25 @@ impl ParticleSet {
         }
         self.set_uniform();
         Guard::ResetToUniform
+    }
+
+    /// The observation update every likelihood model shares: `add` adds each particle's
+    /// log-likelihood to its log-weight, then the guard normalises (NaN particles dropped; if
+    /// nothing usable is left, weights become uniform). Returns the guard's verdict and
+    /// log Σ_k w_k·p(z | x_k), the log of the weighted mean likelihood before normalisation (what
+    /// augmented MCL averages); −∞ for an empty set or when every likelihood is 0. When `add`
+    /// errors, its error is returned and nothing is normalised.
+    pub fn weigh_with(
+        &mut self,
+        add: impl FnOnce(&mut ParticleSet) -> Result<(), ParticleError>,
+    ) -> Result<(Guard, f32), ParticleError> {
+        if self.is_empty() {
+            return Ok((Guard::Clean, f32::NEG_INFINITY));
+        }
+        let log_total_before = self.log_total_weight();
+        add(self)?;
+        let mean_log_likelihood = self.log_total_weight() - log_total_before;
+        Ok((self.normalise_guarded(), mean_log_likelihood))
     }
 
     /// Effective sample size 1 / Σ w², in [1, N] for normalised weights (0 for an empty set).
