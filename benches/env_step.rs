@@ -5,23 +5,14 @@
 //! `cargo bench --bench env_step -- --warm-up-time 1 --measurement-time 3`
 
 use apfn::cli::run::DEFAULT_SYSTEMS;
-use apfn::compose::{MapSource, Pipeline, Scene, standard_registry};
+use apfn::compose::{Pipeline, Scene, standard_registry};
 use apfn::plugin::headless_app;
 use apfn::world::map::procedural::Split;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use std::path::Path;
 
 fn scene(robots: usize) -> Scene {
-    Scene {
-        maps: MapSource::Procedural { split: Split::Seen, first: 0, count: 1, params: Default::default() },
-        robots_per_map: robots,
-        robots_collide: false,
-        seed: 0,
-        episode: Default::default(),
-        robot: Default::default(),
-        physics: Default::default(),
-        systems: None,
-    }
+    Scene::apartments(Split::Seen, 0, 1, robots)
 }
 
 fn env_step(c: &mut Criterion) {

@@ -6,10 +6,8 @@
 //! `cargo run --release --example embed`
 
 use apfn::agent::Action;
-use apfn::compose::{
-    MapSource, NoParams, Pipeline, Registry, Scene, SystemSpec, spawn_scene, standard_registry,
-};
-use apfn::episode::{EpisodeParams, StepError};
+use apfn::compose::{NoParams, Pipeline, Registry, Scene, SystemSpec, spawn_scene, standard_registry};
+use apfn::episode::StepError;
 use apfn::particles::PoseEstimate;
 use apfn::plugin::{ApfnPlugin, ApfnSet};
 use apfn::sense::LidarScan;
@@ -85,18 +83,10 @@ fn report_error(robots: Query<&StepError>, mut log: ResMut<ErrorLog>) {
 pub fn run(steps: usize) -> Vec<f32> {
     let pipeline =
         Pipeline::parse(SCHEDULE, Path::new("examples/embed.rs"), &registry()).expect("valid schedule");
-    let scene = Scene {
-        maps: MapSource::Procedural { split: Split::Unseen, first: 0, count: 1, params: Default::default() },
-        robots_per_map: 1,
-        robots_collide: false,
-        seed: 4,
-        episode: EpisodeParams { steps: steps as u32 + 1, ..Default::default() },
-        robot: Default::default(),
-        physics: Default::default(),
-        systems: None,
-    }
-    .into_loaded(Path::new("examples/embed.rs"))
-    .expect("procedural scenes always load");
+    let mut scene = Scene::apartments(Split::Unseen, 0, 1, 1);
+    scene.seed = 4;
+    scene.episode.steps = steps as u32 + 1; // one episode for the whole run
+    let scene = scene.into_loaded(Path::new("examples/embed.rs")).expect("procedural scenes always load");
 
     let mut app = App::new();
     app.add_plugins((MinimalPlugins, ApfnPlugin { pipeline }))

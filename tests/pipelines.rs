@@ -1,7 +1,7 @@
 //! Every schedule in `systems/` runs for a few agent steps through the users' entry point
 //! (`apfn::plugin::headless_app`, as `apfn run` does) on a small procedural scene.
 
-use apfn::compose::{MapSource, Pipeline, Scene, standard_registry};
+use apfn::compose::{Pipeline, Scene, standard_registry};
 use apfn::particles::PoseEstimate;
 use apfn::plugin::headless_app;
 use apfn::world::TruePose;
@@ -20,16 +20,10 @@ fn schedules() -> Vec<PathBuf> {
 }
 
 fn small_scene() -> Scene {
-    Scene {
-        maps: MapSource::Procedural { split: Split::Seen, first: 3, count: 1, params: Default::default() },
-        robots_per_map: 2,
-        robots_collide: false,
-        seed: 11,
-        episode: apfn::episode::EpisodeParams { steps: 5, ..Default::default() },
-        robot: Default::default(),
-        physics: Default::default(),
-        systems: None,
-    }
+    let mut scene = Scene::apartments(Split::Seen, 3, 1, 2);
+    scene.seed = 11;
+    scene.episode.steps = 5;
+    scene
 }
 
 #[test]

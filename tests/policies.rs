@@ -3,7 +3,7 @@
 //! steps on one procedural apartment with two robots, and the robots move as the policy says.
 
 use apfn::act::Collided;
-use apfn::compose::{MapSource, Pipeline, Scene, standard_registry};
+use apfn::compose::{Pipeline, Scene, standard_registry};
 use apfn::particles::PoseEstimate;
 use apfn::plugin::headless_app;
 use apfn::world::map::procedural::Split;
@@ -24,16 +24,7 @@ struct Run {
 }
 
 fn run(name: &str) -> Run {
-    let scene = Scene {
-        maps: MapSource::Procedural { split: Split::Seen, first: 0, count: 1, params: Default::default() },
-        robots_per_map: 2,
-        robots_collide: false,
-        seed: 0,
-        episode: Default::default(),
-        robot: Default::default(),
-        physics: Default::default(),
-        systems: None,
-    };
+    let scene = Scene::apartments(Split::Seen, 0, 1, 2);
     let loaded = scene.into_loaded(Path::new("scenes/test.ron")).expect("the in-code scene is valid");
     let pipeline = Pipeline::load(&schedule(name), &standard_registry())
         .unwrap_or_else(|e| panic!("systems/{name}.ron must load: {e}"));

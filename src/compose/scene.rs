@@ -83,6 +83,21 @@ pub struct LoadedScene {
 }
 
 impl Scene {
+    /// A scene in code: `count` procedural apartments of `split` from its `first` seed on,
+    /// `robots_per_map` robots each, everything else at its default (change fields as needed).
+    pub fn apartments(split: Split, first: u64, count: usize, robots_per_map: usize) -> Scene {
+        Scene {
+            maps: MapSource::Procedural { split, first, count, params: ApartmentParams::default() },
+            robots_per_map,
+            robots_collide: false,
+            seed: 0,
+            episode: EpisodeParams::default(),
+            robot: RobotParams::default(),
+            physics: PhysicsParams::default(),
+            systems: None,
+        }
+    }
+
     /// Reads, validates and loads a scene file and its maps.
     pub fn load(path: &Path) -> Result<LoadedScene, ComposeError> {
         read_ron::<Scene>(path)?.into_loaded(path)
