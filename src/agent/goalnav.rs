@@ -9,7 +9,7 @@ use crate::agent::Action;
 use crate::episode::EpisodeStart;
 use crate::particles::PoseEstimate;
 use crate::world::map::{TraversableMap, plan_path};
-use crate::world::{EpisodeRng, OccupancyMap, OnMap, Pose2, RobotParams, SimClock, TruePose, wrap_angle};
+use crate::world::{OccupancyMap, OnMap, Pose2, RobotParams, ScenarioRng, SimClock, TruePose, wrap_angle};
 use bevy::prelude::*;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -298,13 +298,13 @@ type GoalnavRobot = (
     Option<&'static PoseEstimate>,
     Option<&'static mut GoalPlan>,
     Has<EpisodeStart>,
-    &'static mut EpisodeRng,
+    &'static mut ScenarioRng,
     &'static mut Action,
 );
 
 /// Reads TruePose (or PoseEstimate with `use_estimate`), EpisodeStart, OnMap, the map's
 /// OccupancyMap and TraversableMap, GoalnavParams, RobotParams, SimClock. Writes GoalPlan
-/// (inserted when missing), EpisodeRng, Action. Keeps each map's wider-margin traversable map
+/// (inserted when missing), ScenarioRng, Action. Keeps each map's wider-margin traversable map
 /// (`clearance_m`) in a per-system cache, built on first use.
 pub fn goalnav_policy(
     params: Res<GoalnavParams>,
@@ -366,7 +366,7 @@ mod tests {
         world.init_resource::<SimClock>();
         let map_entity = world.spawn((map, trav)).id();
         let robot = world
-            .spawn((OnMap(map_entity), TruePose(pose), EpisodeRng::seeded(seed), Action::default()))
+            .spawn((OnMap(map_entity), TruePose(pose), ScenarioRng::seeded(seed), Action::default()))
             .id();
         (world, robot)
     }

@@ -1,12 +1,12 @@
 //! The `random` baseline: a fresh uniform action in [−1, 1]² every agent step.
 
 use crate::agent::Action;
-use crate::world::EpisodeRng;
+use crate::world::ScenarioRng;
 use bevy::prelude::*;
 use rand::Rng;
 
-/// Reads EpisodeRng. Writes Action.
-pub fn random_policy(mut robots: Query<(&mut Action, &mut EpisodeRng)>) {
+/// Reads ScenarioRng. Writes Action.
+pub fn random_policy(mut robots: Query<(&mut Action, &mut ScenarioRng)>) {
     for (mut action, mut rng) in &mut robots {
         *action = Action::new(rng.0.random_range(-1.0..=1.0), rng.0.random_range(-1.0..=1.0));
     }
@@ -20,7 +20,7 @@ mod tests {
     #[test]
     fn random_policy_writes_bounded_varying_actions() {
         let mut world = World::new();
-        let robot = world.spawn((Action::default(), EpisodeRng::seeded(3))).id();
+        let robot = world.spawn((Action::default(), ScenarioRng::seeded(3))).id();
         let mut seen = Vec::new();
         for _ in 0..20 {
             world.run_system_once(random_policy).unwrap();

@@ -152,7 +152,7 @@ pub fn standard_registry() -> Registry {
         step_metrics,
     )
     .register::<NoParams, _, _>(
-        spec("random_policy", Agent, "Reads EpisodeRng. Writes Action.", &[], &["Action"]),
+        spec("random_policy", Agent, "Reads ScenarioRng. Writes Action.", &[], &["Action"]),
         random_policy,
     )
     .register::<TurnParams, _, _>(
@@ -164,7 +164,7 @@ pub fn standard_registry() -> Registry {
         avoid_policy,
     )
     .register::<GoalnavParams, _, _>(
-        spec("goalnav_policy", Agent, "Reads TruePose (or PoseEstimate), EpisodeStart, the map's TraversableMap, EpisodeRng. Writes GoalPlan, Action.", &[], &["Action"]),
+        spec("goalnav_policy", Agent, "Reads TruePose (or PoseEstimate), EpisodeStart, the map's TraversableMap, ScenarioRng. Writes GoalPlan, Action.", &[], &["Action"]),
         goalnav_policy,
     )
     .register::<NoParams, _, _>(

@@ -10,8 +10,9 @@ use crate::particles::{FilterHealth, ParticleSet, PoseEstimate};
 use crate::sense::{DepthStrip, LidarScan, LocalGrid, Odometry, RayGrid};
 use crate::world::map::{DistanceField, NetworkMap, TraversableMap};
 use crate::world::rng::stream;
-use crate::world::{EpisodeRng, OnMap, Pose2, PreviousPose, Robot, TruePose};
+use crate::world::{EpisodeRng, OnMap, Pose2, PreviousPose, Robot, ScenarioRng, TruePose};
 use bevy::prelude::*;
+use rand::Rng;
 
 /// Names a map entity, as results and trajectories refer to it.
 #[derive(Component, Clone, Debug, PartialEq, Eq)]
@@ -24,7 +25,7 @@ pub const NETWORK_RESOLUTION_M: f32 = 0.1;
 const START_POSE_TRIES: usize = 100;
 
 /// Inserts the scene's world resources and spawns its maps and robots; returns the robots in
-/// spawn order. Each robot's random stream is keyed by (seed, map index, robot index).
+/// spawn order. Each robot's random streams are keyed by (seed, map index, robot index).
 pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity>, ComposeError> {
     let scene = &loaded.scene;
     world.insert_resource(scene.robot.clone());
@@ -42,7 +43,8 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
         let mut starts: Vec<Pose2> = Vec::new();
         let mut new_robots = Vec::new();
         for robot_index in 0..scene.robots_per_map {
-            let mut rng = EpisodeRng(stream(&[scene.seed, map_index as u64, robot_index as u64]));
+            let key = stream(&[scene.seed, map_index as u64, robot_index as u64]).random::<u64>();
+            let (mut rng, noise) = (ScenarioRng::seeded(key), EpisodeRng::seeded(key));
             let min_gap = 2.0 * scene.robot.radius_m;
             let start = (0..START_POSE_TRIES)
                 .map(|_| traversable.sample_pose(map, &mut rng.0))
@@ -50,7 +52,7 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
                 .unwrap_or_else(|| traversable.sample_pose(map, &mut rng.0));
             starts.push(start);
             let body = physics.add_robot(start, scene.robot.radius_m, scene.robots_collide);
-            new_robots.push((start, body, rng));
+            new_robots.push((start, body, rng, noise));
         }
         let map_entity = world
             .spawn((
@@ -63,10 +65,10 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
                 map.clone(),
             ))
             .id();
-        for (start, body, rng) in new_robots {
+        for (start, body, scenario, noise) in new_robots {
             let robot = world
                 .spawn((
-                    (Robot, TruePose(start), PreviousPose(start), OnMap(map_entity), body, rng),
+                    (Robot, TruePose(start), PreviousPose(start), OnMap(map_entity), body, scenario, noise),
                     (Action::default(), DriveCommand::default(), Collided::default(), Episode::default()),
                     (LidarScan::default(), LocalGrid::default(), DepthStrip::default(), Odometry::default()),
                     (ParticleSet::default(), PoseEstimate::default(), FilterHealth::default()),

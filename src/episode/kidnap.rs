@@ -5,7 +5,7 @@
 use crate::act::{MapPhysics, PhysicsBody};
 use crate::episode::reset::Episode;
 use crate::world::map::TraversableMap;
-use crate::world::{EpisodeRng, OccupancyMap, OnMap, Pose2, PreviousPose, TruePose};
+use crate::world::{OccupancyMap, OnMap, Pose2, PreviousPose, ScenarioRng, TruePose};
 use bevy::prelude::*;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -65,11 +65,11 @@ pub fn carried_previous(previous: &Pose2, current: &Pose2, to: &Pose2) -> Pose2 
 
 /// Reads Episode, KidnapParams, the map's OccupancyMap and TraversableMap. Writes TruePose,
 /// PreviousPose (carried along, so odometry reports the wheels' motion, not the jump),
-/// MapPhysics (teleport), EpisodeRng.
+/// MapPhysics (teleport), ScenarioRng.
 pub fn kidnap(
     params: Res<KidnapParams>,
     mut maps: Query<(&OccupancyMap, &TraversableMap, &mut MapPhysics)>,
-    mut robots: Query<(&Episode, &OnMap, &PhysicsBody, &mut TruePose, &mut PreviousPose, &mut EpisodeRng)>,
+    mut robots: Query<(&Episode, &OnMap, &PhysicsBody, &mut TruePose, &mut PreviousPose, &mut ScenarioRng)>,
 ) {
     for (episode, on_map, body, mut pose, mut previous, mut rng) in &mut robots {
         if episode.step != params.at_step {
@@ -87,8 +87,8 @@ mod tests {
     use super::*;
     use crate::sense::{Odometry, OdometryParams, odometry};
     use crate::testing::tiny_room;
-    use crate::world::angle_error;
     use crate::world::map::procedural::{ApartmentParams, generate_apartment};
+    use crate::world::{EpisodeRng, angle_error};
     use bevy::ecs::system::RunSystemOnce;
 
     /// A world with one robot at `start` on `map`, at episode step `step`, having moved from
@@ -104,7 +104,13 @@ mod tests {
         let robot = world
             .spawn((
                 (Episode { index: 0, step }, OnMap(m), body),
-                (TruePose(start), PreviousPose(previous), Odometry::default(), EpisodeRng::seeded(5)),
+                (
+                    TruePose(start),
+                    PreviousPose(previous),
+                    Odometry::default(),
+                    ScenarioRng::seeded(5),
+                    EpisodeRng::seeded(5),
+                ),
             ))
             .id();
         (world, robot)

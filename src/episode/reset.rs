@@ -3,7 +3,7 @@
 use crate::act::{MapPhysics, PhysicsBody};
 use crate::particles::ParticleSet;
 use crate::world::map::TraversableMap;
-use crate::world::{EpisodeRng, OccupancyMap, OnMap, PreviousPose, TruePose};
+use crate::world::{OccupancyMap, OnMap, PreviousPose, ScenarioRng, TruePose};
 use bevy::prelude::*;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -38,7 +38,7 @@ pub struct Episode {
 pub struct EpisodeStart;
 
 /// Reads EpisodeParams, the map's OccupancyMap and TraversableMap. Writes Episode, TruePose,
-/// PreviousPose, MapPhysics, EpisodeRng, EpisodeStart, and empties the ParticleSet so that
+/// PreviousPose, MapPhysics, ScenarioRng, EpisodeStart, and empties the ParticleSet so that
 /// `init_particles` draws a fresh one for the new episode.
 pub fn episode_reset(
     params: Res<EpisodeParams>,
@@ -50,7 +50,7 @@ pub fn episode_reset(
         &mut PhysicsBody,
         &mut Episode,
         (&mut TruePose, &mut PreviousPose),
-        &mut EpisodeRng,
+        &mut ScenarioRng,
         Option<&mut ParticleSet>,
     )>,
 ) {
@@ -117,7 +117,7 @@ mod tests {
                 Episode::default(),
                 TruePose(start),
                 PreviousPose(start),
-                EpisodeRng::seeded(1),
+                ScenarioRng::seeded(1),
                 ParticleSet::from_poses(&[start]),
             ))
             .id();
@@ -158,7 +158,7 @@ mod tests {
                 Episode::default(),
                 TruePose(start),
                 PreviousPose(start),
-                EpisodeRng::seeded(3),
+                ScenarioRng::seeded(3),
             ))
             .id();
         let mut visited = std::collections::HashSet::new();

@@ -9,5 +9,5 @@ pub mod robot;
 pub use clock::SimClock;
 pub use map::{Cell, OccupancyMap};
 pub use pose::{Pose2, angle_error, circular_mean, wrap_angle};
-pub use rng::EpisodeRng;
+pub use rng::{EpisodeRng, ScenarioRng};
 pub use robot::{OnMap, PreviousPose, Robot, RobotParams, TruePose};

@@ -14,6 +14,22 @@ impl EpisodeRng {
     }
 }
 
+/// The random stream of what happens *to* a robot: its policy's actions and goals, episode
+/// start poses, map changes and kidnappings. Kept apart from `EpisodeRng` (sensor noise, the
+/// filter's draws) so that changing a sensor or filter setting leaves the robot's drive
+/// unchanged: ablations compare filters on the same trajectories (common random numbers).
+#[derive(Component, Clone, Debug)]
+pub struct ScenarioRng(pub Pcg64Mcg);
+
+impl ScenarioRng {
+    /// Key that separates this stream from an `EpisodeRng` with the same seed.
+    const STREAM: u64 = 0x5ce7_a210;
+
+    pub fn seeded(seed: u64) -> Self {
+        Self(stream(&[seed, Self::STREAM]))
+    }
+}
+
 /// An independent stream keyed by a tuple such as (seed, step, chunk): parallel loops draw from
 /// fixed chunks keyed this way, so the thread count never changes the numbers.
 pub fn stream(keys: &[u64]) -> Pcg64Mcg {
