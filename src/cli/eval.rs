@@ -51,11 +51,20 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let rows: Vec<ResultRow> = outcomes.iter().map(|o| o.row.clone()).collect();
     write_results(&args.out, &rows)?;
     let figures = write_figures(&args.out.join("figures"), &outcomes)?;
+    let seconds = started.elapsed().as_secs_f64();
+    let robot_steps: u64 = cells
+        .iter()
+        .map(|c| {
+            let scene = &eval.scenes[c.group];
+            cell_steps(&eval, c) * (scene.maps.len() * scene.scene.robots_per_map) as u64
+        })
+        .sum();
     println!(
-        "{} cells, {} agent steps in {:.1} s ({} threads); wrote {}/results.{{json,csv,md}}",
+        "{} cells, {} agent steps ({:.0} robot-steps/s) in {:.1} s ({} threads); wrote {}/results.{{json,csv,md}}",
         rows.len(),
         total,
-        started.elapsed().as_secs_f64(),
+        robot_steps as f64 / seconds,
+        seconds,
         rayon::current_num_threads(),
         args.out.display()
     );
