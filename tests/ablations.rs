@@ -31,6 +31,8 @@ fn run(
         seed,
         episode: apfn::episode::EpisodeParams { steps, ..Default::default() },
         robot: Default::default(),
+        overrides: Vec::new(),
+        localizer: None,
     };
     let eval = config.into_loaded(Path::new("tests/ablations.ron")).unwrap_or_else(|e| panic!("{e}"));
     let cell = CellSpec { schedule: 0, task, group: 0 };

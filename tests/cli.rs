@@ -77,6 +77,41 @@ fn eval_writes_the_issue_keys_and_is_deterministic() {
     assert_eq!(rows[2]["particles"], 500, "semi-global default particle count");
     let md = std::fs::read_to_string(dir.path().join("a/results.md")).unwrap();
     assert!(md.contains("| random |") && md.contains("tracking · seen"), "paper-style table:\n{md}");
+    let episodes = std::fs::read_to_string(dir.path().join("a/episodes.csv")).unwrap();
+    assert_eq!(episodes.lines().count(), 1 + 4 * 4, "a header, then 4 cells × 4 episodes");
+}
+
+#[test]
+fn eval_overrides_reach_every_schedule_and_rename_the_localizer() {
+    let dir = tempfile::tempdir().unwrap();
+    let turn = concat!(env!("CARGO_MANIFEST_DIR"), "/systems/turn.ron");
+    let eval = |name: &str, extra: &str| {
+        let text = format!(
+            "Eval(schedules: [{SCHEDULE:?}, {turn:?}], tasks: [tracking], maps: [Apartments(split: seen, count: 1)], \
+             episodes: 2, robots_per_map: 2, episode: (steps: 6), particles: Some(400){extra})"
+        );
+        let config = write(dir.path(), &format!("{name}.ron"), &text);
+        let out = dir.path().join(name);
+        apfn(&["eval", "--config", &config, "--out", out.to_str().unwrap()]).unwrap();
+        let text = std::fs::read_to_string(out.join("results.json")).unwrap();
+        serde_json::from_str::<Vec<serde_json::Value>>(&text).unwrap()
+    };
+    let plain = eval("plain", "");
+    let kld = eval(
+        "kld",
+        ", localizer: Some(\"amcl\"), \
+         overrides: [(\"resample\", (alpha: 1.0, kld: Some((min_particles: 20, max_particles: 400))))]",
+    );
+    assert_eq!(kld.len(), 2);
+    assert!(kld.iter().all(|r| r["localizer"] == "amcl") && plain[0]["localizer"] == "mcl", "{kld:?}");
+    assert_eq!(kld[1]["policy"], "turn");
+    for (a, b) in plain.iter().zip(&kld) {
+        assert_ne!(
+            a["mean_pos_err_m"], b["mean_pos_err_m"],
+            "the override must change {}'s filter",
+            a["policy"]
+        );
+    }
 }
 
 #[test]
@@ -116,6 +151,22 @@ fn bad_eval_configs_fail_before_any_work() {
             "unknown policy file",
             "Eval(schedules: [\"no_such_policy.ron\"], maps: [Apartments(split: seen, count: 1)])".to_owned(),
             "no_such_policy.ron",
+        ),
+        (
+            "override of a step no schedule runs",
+            format!(
+                "Eval(schedules: [{SCHEDULE:?}], maps: [Apartments(split: seen, count: 1)], \
+                 overrides: [(\"depth\", ())])"
+            ),
+            "overrides[0] (`depth`)",
+        ),
+        (
+            "override out of range",
+            format!(
+                "Eval(schedules: [{SCHEDULE:?}], maps: [Apartments(split: seen, count: 1)], \
+                 overrides: [(\"resample\", (alpha: 3.0))])"
+            ),
+            "resample.alpha",
         ),
         (
             "no tasks",

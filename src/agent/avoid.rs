@@ -3,6 +3,7 @@
 //! quarter, and back off while turning when both outer quarters are blocked as well.
 
 use crate::agent::Action;
+use crate::compose::{StepParams, expect_param};
 use crate::sense::DepthStrip;
 use crate::world::RobotParams;
 use bevy::prelude::*;
@@ -26,6 +27,18 @@ pub struct AvoidParams {
 impl Default for AvoidParams {
     fn default() -> Self {
         Self { forward_mps: 0.25, min_distance_m: 0.3, turn_radps: std::f32::consts::FRAC_PI_2 }
+    }
+}
+
+impl StepParams for AvoidParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(
+            self.forward_mps.is_finite() && self.forward_mps >= 0.0,
+            "forward_mps",
+            "a speed ≥ 0 m/s",
+        )?;
+        expect_param(self.min_distance_m >= 0.0, "min_distance_m", "a distance ≥ 0 m")?;
+        expect_param(self.turn_radps.is_finite(), "turn_radps", "a finite turn rate")
     }
 }
 

@@ -6,6 +6,7 @@
 //! steers by the filter's `PoseEstimate` instead, for goal navigation as an active policy.
 
 use crate::agent::Action;
+use crate::compose::{StepParams, expect_param};
 use crate::episode::EpisodeStart;
 use crate::particles::PoseEstimate;
 use crate::world::map::{TraversableMap, plan_path};
@@ -63,6 +64,16 @@ impl Default for GoalnavParams {
             clearance_m: 0.1,
             use_estimate: false,
         }
+    }
+}
+
+impl StepParams for GoalnavParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.goal_tries > 0, "goal_tries", "at least 1 try")?;
+        expect_param(self.waypoint_spacing_m > 0.0, "waypoint_spacing_m", "a spacing > 0 m")?;
+        expect_param(self.reach_m > 0.0, "reach_m", "a radius > 0 m")?;
+        expect_param(self.speed_mps.is_finite() && self.speed_mps >= 0.0, "speed_mps", "a speed ≥ 0 m/s")?;
+        expect_param(self.clearance_m >= 0.0, "clearance_m", "a clearance ≥ 0 m")
     }
 }
 

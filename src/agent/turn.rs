@@ -2,6 +2,7 @@
 //! without the robot ever leaving its spot (paper, §V baselines).
 
 use crate::agent::Action;
+use crate::compose::{StepParams, expect_param};
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -17,6 +18,12 @@ pub struct TurnParams {
 impl Default for TurnParams {
     fn default() -> Self {
         Self { direction: 1.0 }
+    }
+}
+
+impl StepParams for TurnParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.direction.is_finite(), "direction", "a finite number (its sign picks the turn)")
     }
 }
 

@@ -1,11 +1,11 @@
 //! `apfn eval --config FILE.ron [--out DIR]`: every cell of localizer × policy × task × split,
-//! cells in parallel, with a progress bar; writes results.json, results.csv and results.md, and
-//! with `--figures N` a PNG of each cell's first N episodes under `figures/`.
+//! cells in parallel, with a progress bar; writes results.json, results.csv, results.md and
+//! episodes.csv, and with `--figures N` a PNG of each cell's first N episodes under `figures/`.
 
 use crate::cli::set_threads;
 use crate::eval::{
-    CellOutcome, EvalConfig, ResultRow, cell_steps, cells, encode_png, episode_figure, figure_file_name,
-    figure_title, run_cell, write_results,
+    CellOutcome, EpisodeRow, EvalConfig, ResultRow, cell_steps, cells, encode_png, episode_figure,
+    figure_file_name, figure_title, run_cell, write_results,
 };
 use crate::world::map::write_atomically;
 use anyhow::Context;
@@ -49,7 +49,8 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         .collect::<Result<Vec<CellOutcome>, _>>()?;
     bar.finish_and_clear();
     let rows: Vec<ResultRow> = outcomes.iter().map(|o| o.row.clone()).collect();
-    write_results(&args.out, &rows)?;
+    let episodes: Vec<EpisodeRow> = outcomes.iter().flat_map(|o| o.episodes.iter().cloned()).collect();
+    write_results(&args.out, &rows, &episodes)?;
     let figures = write_figures(&args.out.join("figures"), &outcomes)?;
     let seconds = started.elapsed().as_secs_f64();
     let robot_steps: u64 = cells
@@ -60,7 +61,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         })
         .sum();
     println!(
-        "{} cells, {} agent steps ({:.0} robot-steps/s) in {:.1} s ({} threads); wrote {}/results.{{json,csv,md}}",
+        "{} cells, {} agent steps ({:.0} robot-steps/s) in {:.1} s ({} threads); wrote {}/results.{{json,csv,md}} and episodes.csv",
         rows.len(),
         total,
         robot_steps as f64 / seconds,

@@ -10,7 +10,9 @@ mod spawn;
 
 pub use catalog::standard_registry;
 pub use error::{ComposeError, read_ron, read_text};
-pub use registry::{ConfiguredSystem, NoParams, RegisteredSystem, Registry, StepSlot, SystemSpec};
+pub use registry::{
+    ConfiguredSystem, NoParams, RegisteredSystem, Registry, StepParams, StepSlot, SystemSpec, expect_param,
+};
 pub use scene::{LoadedScene, MapSource, NamedMap, Scene};
 pub use schedule::{Pipeline, PipelineStep};
 pub use spawn::{MapName, NETWORK_RESOLUTION_M, spawn_scene};

@@ -23,10 +23,27 @@ pub trait ConfiguredSystem: Send + Sync {
 #[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct StepSlot(pub usize);
 
+/// The parameters of a schedulable system: a resource decoded from the schedule file, then
+/// checked for what its type cannot say (ranges, orderings), so that a bad value fails when the
+/// schedule loads, naming the file and step, instead of mid-run.
+pub trait StepParams: Resource + Serialize + DeserializeOwned + Default + Clone {
+    /// `Err("field: expected …")` when a value is out of range.
+    fn check(&self) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+/// `Err("{field}: expected {expected}")` unless `ok`; the building block of [`StepParams::check`].
+pub fn expect_param(ok: bool, field: &str, expected: &str) -> Result<(), String> {
+    if ok { Ok(()) } else { Err(format!("{field}: expected {expected}")) }
+}
+
 /// Parameters of systems that take none (`("lidar", ())` in a schedule file).
 #[derive(Resource, serde::Deserialize, Serialize, Clone, Debug, Default, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct NoParams {}
+
+impl StepParams for NoParams {}
 
 type Parser = Box<
     dyn Fn(&mut dyn erased_serde::Deserializer<'_>) -> Result<Box<dyn ConfiguredSystem>, erased_serde::Error>
@@ -110,13 +127,14 @@ impl Registry {
     /// Registers `system` whose parameters are the resource `P` (use `NoParams` for none).
     pub fn register<P, S, M>(&mut self, spec: SystemSpec, system: S) -> &mut Self
     where
-        P: Resource + Serialize + DeserializeOwned + Default + Clone,
+        P: StepParams,
         S: IntoScheduleConfigs<ScheduleSystem, M> + Copy + Send + Sync + 'static,
         M: 'static,
     {
         assert!(self.get(spec.name).is_none(), "system `{}` registered twice", spec.name);
         let parse: Parser = Box::new(move |de| {
             let params: P = erased_serde::deserialize(de)?;
+            params.check().map_err(<erased_serde::Error as serde::de::Error>::custom)?;
             Ok(Box::new(WithParams { params, system, marker: PhantomData }) as Box<dyn ConfiguredSystem>)
         });
         let defaults = Box::new(move || {

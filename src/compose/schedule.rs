@@ -101,6 +101,23 @@ impl Pipeline {
         Ok(())
     }
 
+    /// Replaces the parameters of step `name` by `params` (RON text, fields left out take the
+    /// system's defaults), decoded and checked as a schedule file's own. Returns whether this
+    /// pipeline runs the step; errors name the system's problem with the text.
+    pub fn set_params(&mut self, name: &str, params: &str, registry: &Registry) -> Result<bool, String> {
+        let Some(entry) = registry.get(name) else {
+            let hint = registry.nearest(name).map(|n| format!(" (did you mean `{n}`?)")).unwrap_or_default();
+            return Err(format!("unknown system `{name}`{hint}"));
+        };
+        let Some(step) = self.steps.iter_mut().find(|s| s.name == entry.name) else {
+            return Ok(false);
+        };
+        let mut de = ron::Deserializer::from_str(params).map_err(|e| e.to_string())?;
+        let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
+        step.system = entry.parse_params(&mut erased).map_err(|e| format!("parameters of `{name}`: {e}"))?;
+        Ok(true)
+    }
+
     /// Adds every step to `Update`, each in its stage and in file order.
     pub fn install(&self, app: &mut App) {
         for (index, step) in self.steps.iter().enumerate() {
@@ -248,6 +265,42 @@ mod tests {
         assert!(m.contains("resample"), "the system is named: {m}");
         let m = message(r#"Schedule(steps: [("resample", (alfa: 0.5))])"#);
         assert!(m.contains("alfa") && m.contains("alpha"), "unknown field and the expected ones: {m}");
+    }
+
+    #[test]
+    fn schedule_out_of_range_parameter_names_field_and_place() {
+        let m = message("Schedule(steps: [\n (\"resample\", (alpha: 1.5)),\n])");
+        assert!(m.starts_with("test.ron:2:"), "error must point at line 2: {m}");
+        assert!(m.contains("`resample`") && m.contains("resample.alpha") && m.contains("[0, 1]"), "{m}");
+        let m = message(r#"Schedule(steps: [("lidar", (range_min_m: 6.0, range_max_m: 5.0))])"#);
+        assert!(m.contains("range_min_m < range_max_m"), "{m}");
+        let m = message(r#"Schedule(steps: [("odometry", (rot_noise_deg: -5.0))])"#);
+        assert!(m.contains("rot_noise_deg") && m.contains("≥ 0"), "{m}");
+    }
+
+    #[test]
+    fn every_registered_default_passes_its_own_check() {
+        for entry in standard_registry().entries() {
+            let mut de = ron::Deserializer::from_str("()").expect("valid RON");
+            let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
+            let parsed = entry.parse_params(&mut erased);
+            assert!(parsed.is_ok(), "`{}` rejects its own defaults: {:?}", entry.name, parsed.err());
+        }
+    }
+
+    #[test]
+    fn set_params_replaces_one_step_and_checks_it() {
+        let registry = standard_registry();
+        let mut p =
+            parse(r#"Schedule(steps: [("lidar", ()), ("init_particles", ()), ("resample", (alpha: 1.0))])"#)
+                .expect("valid schedule");
+        assert_eq!(p.set_params("resample", "(alpha: 0.25)", &registry), Ok(true));
+        assert!(p.steps[2].system.params_ron().contains("alpha: 0.25"), "{}", p.steps[2].system.params_ron());
+        assert_eq!(p.set_params("depth", "()", &registry), Ok(false), "a step the schedule lacks");
+        let e = p.set_params("resample", "(alpha: 2.0)", &registry).expect_err("out of range");
+        assert!(e.contains("resample.alpha"), "{e}");
+        let e = p.set_params("resampel", "()", &registry).expect_err("unknown system");
+        assert!(e.contains("did you mean `resample`"), "{e}");
     }
 
     #[test]

@@ -3,6 +3,7 @@
 //! carrying. Odometry keeps reporting the motion the wheels made; only the scans betray the move.
 
 use crate::act::{MapPhysics, PhysicsBody};
+use crate::compose::{StepParams, expect_param};
 use crate::episode::reset::Episode;
 use crate::world::map::TraversableMap;
 use crate::world::{OccupancyMap, OnMap, Pose2, PreviousPose, ScenarioRng, TruePose};
@@ -29,6 +30,13 @@ pub struct KidnapParams {
 impl Default for KidnapParams {
     fn default() -> Self {
         Self { at_step: 25, min_distance_m: 2.0 }
+    }
+}
+
+impl StepParams for KidnapParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.at_step > 0, "at_step", "a step ≥ 1 of the episode")?;
+        expect_param(self.min_distance_m >= 0.0, "min_distance_m", "a distance ≥ 0 m")
     }
 }
 

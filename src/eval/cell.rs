@@ -4,6 +4,7 @@
 use crate::compose::{ComposeError, Pipeline};
 use crate::episode::{CompletedEpisodes, EpisodeRecord, summarize};
 use crate::eval::config::LoadedEval;
+use crate::eval::episodes::EpisodeRow;
 use crate::particles::{InitParams, Task};
 use crate::plugin::{ApfnSet, headless_app};
 use crate::world::OccupancyMap;
@@ -77,24 +78,27 @@ pub fn labels(pipeline: &Pipeline) -> (String, String) {
     (localizer, policy)
 }
 
-/// The table labels of the config's `index`-th schedule: [`labels`], with the schedule's file
+/// The table labels of the config's `index`-th schedule: [`labels`] (the localizer renamed when
+/// the config names it), with the schedule's file
 /// stem appended to the policy when another schedule of the config has the same labels (an
 /// ablation that changes a parameter or a filter step), e.g. `random (resample_none)`.
 pub fn schedule_labels(eval: &LoadedEval, index: usize) -> (String, String) {
     let (path, pipeline) = &eval.schedules[index];
-    let (localizer, policy) = labels(pipeline);
-    let clash = (eval.schedules.iter().enumerate())
-        .any(|(other, (_, p))| other != index && labels(p) == (localizer.clone(), policy.clone()));
+    let own = labels(pipeline);
+    let clash = (eval.schedules.iter().enumerate()).any(|(other, (_, p))| other != index && labels(p) == own);
+    let (derived, policy) = own;
+    let localizer = eval.config.localizer.clone().unwrap_or(derived);
     match (clash, path.file_stem()) {
         (true, Some(stem)) => (localizer, format!("{policy} ({})", stem.to_string_lossy())),
         _ => (localizer, policy),
     }
 }
 
-/// A finished cell: its table row, the episodes behind it, and the maps they ran on (by entity,
-/// as `EpisodeRecord::map` names them) for figures.
+/// A finished cell: its table row, one summary per episode, the episodes' full records, and the
+/// maps they ran on (by entity, as `EpisodeRecord::map` names them) for figures.
 pub struct CellOutcome {
     pub row: ResultRow,
+    pub episodes: Vec<EpisodeRow>,
     pub records: Vec<EpisodeRecord>,
     pub maps: HashMap<Entity, OccupancyMap>,
 }
@@ -145,7 +149,9 @@ pub fn run_cell(eval: &LoadedEval, cell: &CellSpec, on_step: impl Fn()) -> Resul
         final_orient_err_rad: m.final_orient_err_rad,
         success_rate: m.success_rate,
     };
-    Ok(CellOutcome { row, records, maps })
+    let episodes =
+        records.iter().enumerate().filter_map(|(k, r)| EpisodeRow::from_record(&row, k, r)).collect();
+    Ok(CellOutcome { row, episodes, records, maps })
 }
 
 #[cfg(test)]

@@ -15,6 +15,7 @@ use crate::episode::EpisodeParams;
 use crate::particles::Task;
 use crate::world::RobotParams;
 use crate::world::map::procedural::{ApartmentParams, Split};
+use ron::value::RawValue;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -42,6 +43,15 @@ pub struct EvalConfig {
     pub episode: EpisodeParams,
     #[serde(default)]
     pub robot: RobotParams,
+    /// Parameters that replace a step's own in every schedule that runs the step, e.g.
+    /// `overrides: [("lidar", (range_max_m: 12.0))]`: one config evaluates every policy under
+    /// another sensor or filter setting without copies of their schedule files. Fields left out
+    /// take the system's defaults.
+    #[serde(default)]
+    pub overrides: Vec<(String, Box<RawValue>)>,
+    /// The localizer's name in the tables; `None` derives it from the schedules' likelihood step.
+    #[serde(default)]
+    pub localizer: Option<String>,
 }
 
 fn all_tasks() -> Vec<Task> {
@@ -150,7 +160,7 @@ impl EvalConfig {
         }
         let base = path.parent().unwrap_or(Path::new("."));
         let registry = standard_registry();
-        let schedules = self
+        let mut schedules = self
             .schedules
             .iter()
             .map(|p| {
@@ -169,6 +179,18 @@ impl EvalConfig {
                 Ok((p.clone(), pipeline))
             })
             .collect::<Result<Vec<_>, ComposeError>>()?;
+        for (index, (name, params)) in self.overrides.iter().enumerate() {
+            let field = format!("overrides[{index}] (`{name}`)");
+            let mut applied = false;
+            for (_, pipeline) in &mut schedules {
+                applied |= pipeline
+                    .set_params(name, params.get_ron(), &registry)
+                    .map_err(|message| invalid(&field, message))?;
+            }
+            if !applied {
+                return Err(invalid(&field, format!("no schedule of this config runs `{name}`")));
+            }
+        }
         let scenes = self
             .maps
             .iter()

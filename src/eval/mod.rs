@@ -4,12 +4,14 @@
 
 mod cell;
 mod config;
+mod episodes;
 mod figure;
 mod pixel_text;
 mod table;
 
 pub use cell::{CellOutcome, CellSpec, ResultRow, cell_steps, cells, labels, run_cell, schedule_labels};
 pub use config::{EvalConfig, LoadedEval, MapGroup};
+pub use episodes::EpisodeRow;
 pub use figure::{FigureError, encode_png, episode_figure, figure_file_name, figure_title};
 pub use pixel_text::PixelText;
 pub use table::{csv, markdown, task_name, write_results};

@@ -1,45 +1,31 @@
-//! Writes evaluation results: results.json (rows), results.csv, and results.md laid out like the
-//! paper's tables (rows = policies, column groups = tasks, one column per split).
+//! Writes evaluation results: results.json (rows), results.csv, results.md laid out like the
+//! paper's tables (rows = policies, column groups = tasks, one column per split), and
+//! episodes.csv (every episode behind every row).
 
 use crate::eval::cell::ResultRow;
+use crate::eval::episodes::EpisodeRow;
 use crate::particles::Task;
 use crate::world::map::write_atomically;
+use serde::Serialize;
 use std::path::Path;
 
-/// Writes the three result files atomically into `out`.
-pub fn write_results(out: &Path, rows: &[ResultRow]) -> anyhow::Result<()> {
+/// Writes the four result files atomically into `out`.
+pub fn write_results(out: &Path, rows: &[ResultRow], episodes: &[EpisodeRow]) -> anyhow::Result<()> {
     std::fs::create_dir_all(out)?;
     write_atomically(&out.join("results.json"), serde_json::to_string_pretty(rows)?.as_bytes())?;
-    write_atomically(&out.join("results.csv"), csv(rows).as_bytes())?;
+    write_atomically(&out.join("results.csv"), &csv(rows)?)?;
     write_atomically(&out.join("results.md"), markdown(rows).as_bytes())?;
+    write_atomically(&out.join("episodes.csv"), &csv(episodes)?)?;
     Ok(())
 }
 
-/// One line per row, same keys as the JSON.
-pub fn csv(rows: &[ResultRow]) -> String {
-    let mut text = "localizer,policy,task,split,map,particles,episodes,seed,mean_pos_err_m,rmse_pos_m,\
-                    final_pos_err_m,mean_orient_err_rad,final_orient_err_rad,success_rate\n"
-        .to_owned();
-    for r in rows {
-        text += &format!(
-            "{},{},{},{},\"{}\",{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.3}\n",
-            r.localizer,
-            r.policy,
-            task_name(r.task),
-            r.split,
-            r.map,
-            r.particles,
-            r.episodes,
-            r.seed,
-            r.mean_pos_err_m,
-            r.rmse_pos_m,
-            r.final_pos_err_m,
-            r.mean_orient_err_rad,
-            r.final_orient_err_rad,
-            r.success_rate
-        );
+/// A header from `T`'s field names, then one line per record.
+pub fn csv<T: Serialize>(records: &[T]) -> anyhow::Result<Vec<u8>> {
+    let mut writer = csv::Writer::from_writer(Vec::new());
+    for record in records {
+        writer.serialize(record)?;
     }
-    text
+    Ok(writer.into_inner()?)
 }
 
 pub fn task_name(task: Task) -> &'static str {
@@ -110,6 +96,19 @@ pub fn markdown(rows: &[ResultRow]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn csv_has_the_json_keys_as_header_and_quotes_commas() {
+        let mut r = row("mcl", "turn", Task::SemiGlobal);
+        r.map = "maps/a,b.yaml".into();
+        let text = String::from_utf8(csv(&[r]).expect("encodes")).expect("utf-8");
+        let mut lines = text.lines();
+        assert!(lines.next().expect("header").starts_with("localizer,policy,task,split,map,particles,"));
+        assert!(
+            lines.next().expect("row").starts_with("mcl,turn,semi_global,seen,\"maps/a,b.yaml\",300,"),
+            "{text}"
+        );
+    }
 
     fn row(localizer: &str, policy: &str, task: Task) -> ResultRow {
         ResultRow {

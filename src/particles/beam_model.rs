@@ -16,6 +16,7 @@
 //! readings below range_min count as range_max (nav2 `amcl_node` maps both to max range). The
 //! LiDAR sits at the robot centre, facing ahead.
 
+use crate::compose::{StepParams, expect_param};
 use crate::particles::likelihood_field::selected_beams;
 use crate::particles::set::{
     FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet, record_observation,
@@ -64,6 +65,17 @@ impl Default for BeamModelParams {
             lambda_short: 0.1,
             max_beams: 60,
         }
+    }
+}
+
+impl StepParams for BeamModelParams {
+    fn check(&self) -> Result<(), String> {
+        let weights = [self.z_hit, self.z_short, self.z_max, self.z_rand];
+        expect_param(weights.iter().all(|&z| z >= 0.0), "z_hit, z_short, z_max, z_rand", "weights ≥ 0")?;
+        expect_param(weights.iter().sum::<f32>() > 0.0, "z_hit + z_short + z_max + z_rand", "> 0")?;
+        expect_param(self.sigma_hit > 0.0, "sigma_hit", "a std-dev > 0 m")?;
+        expect_param(self.lambda_short > 0.0, "lambda_short", "a rate > 0")?;
+        expect_param(self.max_beams > 0, "max_beams", "at least 1 beam")
     }
 }
 

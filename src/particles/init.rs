@@ -5,6 +5,7 @@
 //! Contract: an episode reset clears a robot's `ParticleSet`; `init_particles` fills every empty
 //! set and leaves non-empty ones alone, so it can run every step at no cost.
 
+use crate::compose::{StepParams, expect_param};
 use crate::particles::set::{FilterHealth, ParticleError, ParticleSet};
 use crate::world::map::TraversableMap;
 use crate::world::{EpisodeRng, OccupancyMap, OnMap, Pose2, TruePose, wrap_angle};
@@ -59,6 +60,15 @@ impl Default for InitParams {
             tracking_sigma_deg: 30.0,
             semi_global_box_m: 3.3,
         }
+    }
+}
+
+impl StepParams for InitParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.particles != Some(0), "particles", "at least 1 (or None for the task default)")?;
+        expect_param(self.tracking_sigma_m >= 0.0, "tracking_sigma_m", "a std-dev ≥ 0 m")?;
+        expect_param(self.tracking_sigma_deg >= 0.0, "tracking_sigma_deg", "a std-dev ≥ 0°")?;
+        expect_param(self.semi_global_box_m > 0.0, "semi_global_box_m", "a box side > 0 m")
     }
 }
 

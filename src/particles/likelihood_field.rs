@@ -3,11 +3,13 @@
 //! one lookup of the distance to the nearest obstacle, d, and scores
 //! p = z_hit·exp(−d²/2σ²) + z_rand/range_max.
 //!
-//! Accumulation: we add Σ log p to the particle's log-weight — the model's actual likelihood
-//! under independent beams. AMCL instead uses 1 + Σ p³, a heuristic that flattens the posterior;
-//! Σ log p is sharper, so keep `max_beams` moderate (nav2's 60) or lower `z_hit` if particles
-//! starve. The LiDAR is taken to sit at the robot centre, facing ahead.
+//! Accumulation ([`BeamCombination`]): by default we add Σ log p to the particle's log-weight — the
+//! model's actual likelihood under independent beams. AMCL instead multiplies the weight by
+//! 1 + Σ p³, a heuristic that flattens the posterior so that a few hundred particles keep
+//! hypotheses alive in self-similar places (long aisles); `combine: amcl_cube_sum` reproduces it.
+//! The LiDAR is taken to sit at the robot centre, facing ahead.
 
+use crate::compose::{StepParams, expect_param};
 use crate::particles::set::{
     FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet, record_observation,
 };
@@ -42,11 +44,41 @@ pub struct LikelihoodFieldParams {
     /// Distances to the nearest obstacle are clamped to this, metres; endpoints off the map count
     /// as this far (nav2 `laser_likelihood_max_dist`: 2.0).
     pub laser_likelihood_max_dist: f32,
+    /// How the per-beam p combine into one particle likelihood.
+    pub combine: BeamCombination,
+}
+
+/// How per-beam likelihoods p_i combine into a particle's likelihood.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum BeamCombination {
+    /// Π p_i: the likelihood of independent beams (Probabilistic Robotics' `likelihood_field`).
+    #[default]
+    Product,
+    /// 1 + Σ p_i³: nav2 AMCL's and Beluga's heuristic, far flatter than the product.
+    AmclCubeSum,
 }
 
 impl Default for LikelihoodFieldParams {
     fn default() -> Self {
-        Self { z_hit: 0.5, z_rand: 0.5, sigma_hit: 0.2, max_beams: 60, laser_likelihood_max_dist: 2.0 }
+        Self {
+            z_hit: 0.5,
+            z_rand: 0.5,
+            sigma_hit: 0.2,
+            max_beams: 60,
+            laser_likelihood_max_dist: 2.0,
+            combine: BeamCombination::Product,
+        }
+    }
+}
+
+impl StepParams for LikelihoodFieldParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.z_hit >= 0.0 && self.z_rand >= 0.0, "z_hit, z_rand", "mixture weights ≥ 0")?;
+        expect_param(self.z_hit + self.z_rand > 0.0, "z_hit + z_rand", "> 0")?;
+        expect_param(self.sigma_hit > 0.0, "sigma_hit", "a std-dev > 0 m")?;
+        expect_param(self.max_beams > 0, "max_beams", "at least 1 beam")?;
+        expect_param(self.laser_likelihood_max_dist > 0.0, "laser_likelihood_max_dist", "a distance > 0 m")
     }
 }
 
@@ -83,20 +115,25 @@ fn beam_offsets(scan: &LidarScan, max_beams: usize, resolution_m: f32) -> Vec<(f
         .collect()
 }
 
-/// log p(d) sampled at d_k = k·max_dist/(LEN−1).
-fn log_p_table(params: &LikelihoodFieldParams, range_max_m: f32) -> Vec<f32> {
+/// Each beam's summand at d_k = k·max_dist/(LEN−1): log p(d) for the product, p(d)³ for AMCL's sum.
+fn beam_term_table(params: &LikelihoodFieldParams, range_max_m: f32) -> Vec<f32> {
     let sigma = params.sigma_hit.max(1e-6);
     let rand = if range_max_m > 0.0 { params.z_rand / range_max_m } else { 0.0 };
     let max_dist = params.laser_likelihood_max_dist.max(1e-6);
     (0..LOG_P_TABLE_LEN)
         .map(|k| {
             let d = k as f32 * max_dist / (LOG_P_TABLE_LEN - 1) as f32;
-            (params.z_hit * (-d * d / (2.0 * sigma * sigma)).exp() + rand).ln()
+            let p = params.z_hit * (-d * d / (2.0 * sigma * sigma)).exp() + rand;
+            match params.combine {
+                BeamCombination::Product => p.ln(),
+                BeamCombination::AmclCubeSum => p * p * p,
+            }
         })
         .collect()
 }
 
-/// Adds each particle's Σ log p over the used beams to its log-weight (no normalisation).
+/// Adds each particle's log-likelihood over the used beams — Σ log p, or ln(1 + Σ p³) for
+/// [`BeamCombination::AmclCubeSum`] — to its log-weight (no normalisation).
 /// `origin` is the world pose of the field's cell (0, 0) corner (the OccupancyMap origin); the
 /// field's own width/height/resolution give the rest of the geometry. Particles with a
 /// non-finite pose get a NaN log-weight, for the guard to drop. Errors (leaving the set
@@ -115,7 +152,11 @@ pub fn add_log_likelihoods(
     };
     let inv_res = 1.0 / field.resolution_m;
     let beams = beam_offsets(scan, params.max_beams, field.resolution_m);
-    let table = log_p_table(params, scan.range_max_m);
+    let table = beam_term_table(params, scan.range_max_m);
+    let finish = match params.combine {
+        BeamCombination::Product => |sum: f32| sum,
+        BeamCombination::AmclCubeSum => |sum: f32| sum.ln_1p(),
+    };
     let far = table[LOG_P_TABLE_LEN - 1];
     let scale = (LOG_P_TABLE_LEN - 1) as f32 / params.laser_likelihood_max_dist.max(1e-6);
     let max_dist = params.laser_likelihood_max_dist;
@@ -146,7 +187,7 @@ pub fn add_log_likelihoods(
                     far
                 };
             }
-            *lw += sum;
+            *lw += finish(sum);
         }
     });
     Ok(())
@@ -355,6 +396,42 @@ mod tests {
                 set.log_w[k]
             );
         }
+    }
+
+    #[test]
+    fn amcl_cube_sum_matches_its_formula_and_is_flatter() {
+        let (map, truth) = (tiny_room(), Pose2::new(0.6, 0.6, 0.3));
+        let (field, scan) = (brute_field(&map), marched_scan(&map, truth));
+        let poses = [truth, Pose2::new(0.8, 0.5, 0.4)];
+        let log_l = |combine| {
+            let params = LikelihoodFieldParams { combine, ..Default::default() };
+            let mut set = ParticleSet::from_poses(&poses);
+            set.log_w = vec![0.0; 2];
+            add_log_likelihoods(&mut set, &scan, &field, &Pose2::default(), &params).expect("valid field");
+            set.log_w
+        };
+        let (product, cube) = (log_l(BeamCombination::Product), log_l(BeamCombination::AmclCubeSum));
+        for k in 0..2 {
+            let p = &poses[k];
+            let expected: f32 = beam_indices(scan.ranges_m.len(), 60)
+                .into_iter()
+                .filter(|&i| scan.ranges_m[i] < scan.range_max_m)
+                .map(|i| {
+                    let (r, a) =
+                        (scan.ranges_m[i], p.yaw + scan.angle_min_rad + i as f32 * scan.angle_increment_rad);
+                    let d = field.distance_at(&map, p.x + r * a.cos(), p.y + r * a.sin()).min(2.0);
+                    (0.5 * (-d * d / (2.0 * 0.04)).exp() + 0.5 / scan.range_max_m).powi(3)
+                })
+                .sum::<f32>()
+                .ln_1p();
+            assert!(
+                (cube[k] - expected).abs() < 0.02,
+                "particle {k}: kernel {} vs 1 + Σp³ = {expected}",
+                cube[k]
+            );
+        }
+        assert!(cube[0] > cube[1], "the truth still scores higher");
+        assert!(cube[0] - cube[1] < (product[0] - product[1]) / 10.0, "{cube:?} vs {product:?}: far flatter");
     }
 
     #[test]

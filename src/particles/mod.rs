@@ -1,12 +1,13 @@
 //! ② Particles: the particle set and the filter steps, in the order a step runs them:
 //! init (fills empty sets) → transition → likelihood_field or beam_model → (augmented recovery) →
-//! resample →
+//! resample (fixed or KLD-adapted count) →
 //! estimate. Each step is a plain kernel over a `ParticleSet` plus a small system; weights are
 //! log-weights, Σ exp = 1.
 
 mod beam_model;
 mod estimate;
 mod init;
+mod kld;
 mod likelihood_field;
 mod recovery;
 mod resample;
@@ -19,6 +20,7 @@ pub use beam_model::{
 };
 pub use estimate::{PoseEstimate, estimate, estimate_pose};
 pub use init::{InitParams, Initialised, Task, draw_initial_set, init_particles};
+pub use kld::{KldHistogram, KldParams};
 pub use likelihood_field::{
     LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,
     mcl_likelihood_field, selected_beams, weigh_likelihood_field,
@@ -26,7 +28,9 @@ pub use likelihood_field::{
 pub use recovery::{
     RecoveryParams, RecoveryState, augmented_recovery, inject_uniform, recover, update_averages,
 };
-pub use resample::{ResampleParams, resample, resample_soft, should_resample, systematic_indices};
+pub use resample::{
+    ResampleParams, resample, resample_kld, resample_soft, resample_with, should_resample, systematic_indices,
+};
 pub use set::{
     Degenerate, FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet, record_observation,
 };

@@ -15,6 +15,7 @@
 //! - They start at the first update of each episode (nav2 does the same when they are 0) and are
 //!   not reset after an injection (nav2 resets them, which caps injections at one step in two).
 
+use crate::compose::{StepParams, expect_param};
 use crate::episode::EpisodeStart;
 use crate::particles::likelihood_field::{LikelihoodFieldParams, add_log_likelihoods};
 use crate::particles::set::{FilterHealth, LikelihoodStats, ParticleError, ParticleSet};
@@ -41,6 +42,17 @@ pub struct RecoveryParams {
 impl Default for RecoveryParams {
     fn default() -> Self {
         Self { alpha_slow: 0.001, alpha_fast: 0.1 }
+    }
+}
+
+impl StepParams for RecoveryParams {
+    fn check(&self) -> Result<(), String> {
+        let rate = |a: f32| (0.0..=1.0).contains(&a);
+        expect_param(
+            rate(self.alpha_slow) && rate(self.alpha_fast),
+            "alpha_slow, alpha_fast",
+            "rates in [0, 1]",
+        )
     }
 }
 

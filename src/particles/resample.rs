@@ -1,7 +1,10 @@
 //! Soft resampling (PF-net): draw from q(k) = α·w_k + (1−α)/K with a low-variance (systematic)
 //! draw and re-weight by w_k / q(k), so the set stays an unbiased weighted sample while gradients
 //! (in training) and diversity survive. α = 1 is classical hard resampling with uniform weights after.
+//! With `kld` set, the count adapts to the belief's spread (KLD-sampling, as nav2 AMCL does).
 
+use crate::compose::StepParams;
+use crate::particles::kld::{KldHistogram, KldParams};
 use crate::particles::set::{ParticleError, ParticleSet};
 use crate::world::EpisodeRng;
 use bevy::prelude::*;
@@ -17,11 +20,19 @@ pub struct ResampleParams {
     pub alpha: f32,
     /// Resample only when ESS/N falls below this fraction; `None` = every step (PF-net does).
     pub ess_threshold: Option<f32>,
+    /// Adapt the particle count by KLD-sampling; `None` keeps the count (PF-net does).
+    pub kld: Option<KldParams>,
 }
 
 impl Default for ResampleParams {
     fn default() -> Self {
-        Self { alpha: 0.5, ess_threshold: None }
+        Self { alpha: 0.5, ess_threshold: None, kld: None }
+    }
+}
+
+impl StepParams for ResampleParams {
+    fn check(&self) -> Result<(), String> {
+        self.validate().map_err(|e| e.to_string())
     }
 }
 
@@ -34,13 +45,15 @@ impl ResampleParams {
                 expected: "a value in [0, 1]",
             });
         }
-        match self.ess_threshold {
-            Some(t) if !(0.0..=1.0).contains(&t) => Err(ParticleError::InvalidParam {
+        if let Some(t) = self.ess_threshold
+            && !(0.0..=1.0).contains(&t)
+        {
+            return Err(ParticleError::InvalidParam {
                 field: "resample.ess_threshold",
                 expected: "None or a fraction in [0, 1]",
-            }),
-            _ => Ok(()),
+            });
         }
+        self.kld.as_ref().map_or(Ok(()), KldParams::validate)
     }
 }
 
@@ -77,13 +90,55 @@ pub fn systematic_indices(q: &[f64], n: usize, rng: &mut impl Rng) -> Vec<usize>
 /// are left alone.
 pub fn resample_soft(set: &mut ParticleSet, alpha: f32, rng: &mut impl Rng) {
     let n = set.len();
+    if let Some(q) = proposal(set, alpha) {
+        let picks = systematic_indices(&q, n, rng);
+        rebuild(set, &picks, &q, alpha);
+    }
+}
+
+/// Soft resampling whose count adapts by KLD-sampling: a systematic draw of `max_particles`,
+/// visited in random order (so any prefix is itself an unbiased sample) until the prefix is as
+/// large as Fox's bound for the bins it occupies.
+pub fn resample_kld(set: &mut ParticleSet, alpha: f32, kld: &KldParams, rng: &mut impl Rng) {
+    let Some(q) = proposal(set, alpha) else { return };
+    let mut picks = systematic_indices(&q, kld.max_particles.max(1), rng);
+    let mut histogram = KldHistogram::new(kld);
+    let mut kept = 0;
+    while kept < picks.len() {
+        let swap = rng.random_range(kept..picks.len());
+        picks.swap(kept, swap);
+        let k = picks[kept];
+        histogram.insert(set.x[k], set.y[k], set.yaw[k]);
+        kept += 1;
+        if histogram.is_enough(kept) {
+            break;
+        }
+    }
+    picks.truncate(kept);
+    rebuild(set, &picks, &q, alpha);
+}
+
+/// Resamples as `params` say (fixed count, or KLD-adapted).
+pub fn resample_with(set: &mut ParticleSet, params: &ResampleParams, rng: &mut impl Rng) {
+    match &params.kld {
+        Some(kld) => resample_kld(set, params.alpha, kld, rng),
+        None => resample_soft(set, params.alpha, rng),
+    }
+}
+
+/// The proposal q = α·w + (1−α)/K, or `None` for an empty or ragged set.
+fn proposal(set: &ParticleSet, alpha: f32) -> Option<Vec<f64>> {
+    let n = set.len();
     if n == 0 || set.x.len() != n || set.y.len() != n || set.yaw.len() != n {
-        return;
+        return None;
     }
     let alpha = alpha.clamp(0.0, 1.0) as f64;
     let uniform = (1.0 - alpha) / n as f64;
-    let q: Vec<f64> = set.log_w.iter().map(|&l| alpha * (l as f64).exp() + uniform).collect();
-    let picks = systematic_indices(&q, n, rng);
+    Some(set.log_w.iter().map(|&l| alpha * (l as f64).exp() + uniform).collect())
+}
+
+/// Replaces `set` by the picked particles with log-weights log(w/q) (uniform for α = 1), normalised.
+fn rebuild(set: &mut ParticleSet, picks: &[usize], q: &[f64], alpha: f32) {
     let log_w = |k: usize| if alpha >= 1.0 { 0.0 } else { ((set.log_w[k] as f64) - q[k].ln()) as f32 };
     let next = ParticleSet {
         x: picks.iter().map(|&k| set.x[k]).collect(),
@@ -102,7 +157,7 @@ pub fn resample_soft(set: &mut ParticleSet, alpha: f32, rng: &mut impl Rng) {
 pub fn resample(params: Res<ResampleParams>, mut robots: Query<(&mut ParticleSet, &mut EpisodeRng)>) {
     robots.par_iter_mut().for_each(|(mut set, mut rng)| {
         if should_resample(&set, params.ess_threshold) {
-            resample_soft(&mut set, params.alpha, &mut rng.0);
+            resample_with(&mut set, &params, &mut rng.0);
         }
     });
 }
@@ -110,6 +165,7 @@ pub fn resample(params: Res<ResampleParams>, mut robots: Query<(&mut ParticleSet
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::world::Pose2;
     use crate::world::rng::stream;
     use bevy::ecs::system::RunSystemOnce;
 
@@ -157,7 +213,7 @@ mod tests {
     #[test]
     fn resample_respects_ess_threshold() {
         let mut world = World::new();
-        world.insert_resource(ResampleParams { alpha: 1.0, ess_threshold: Some(0.5) });
+        world.insert_resource(ResampleParams { alpha: 1.0, ess_threshold: Some(0.5), kld: None });
         let flat = world.spawn((ParticleSet::from_weights(&[1.0; 4]), EpisodeRng::seeded(1))).id();
         let peaked =
             world.spawn((ParticleSet::from_weights(&[1.0, 0.0, 0.0, 0.0]), EpisodeRng::seeded(2))).id();
@@ -171,6 +227,55 @@ mod tests {
     #[test]
     fn resample_params_validate_ranges() {
         assert!(ResampleParams::default().validate().is_ok());
-        assert!(ResampleParams { alpha: 1.5, ess_threshold: None }.validate().is_err(), "α > 1 rejected");
+        assert!(ResampleParams { alpha: 1.5, ..Default::default() }.validate().is_err(), "α > 1 rejected");
+        let inverted = KldParams { min_particles: 9, max_particles: 3, ..Default::default() };
+        assert!(
+            ResampleParams { kld: Some(inverted), ..Default::default() }.validate().is_err(),
+            "bad kld rejected"
+        );
+    }
+
+    /// `n` particles on a line, uniform weights, spaced `spacing_m` apart.
+    fn line_of(n: usize, spacing_m: f32) -> ParticleSet {
+        let poses: Vec<Pose2> = (0..n).map(|k| Pose2::new(k as f32 * spacing_m, 0.0, 0.0)).collect();
+        ParticleSet::from_poses(&poses)
+    }
+
+    #[test]
+    fn resample_kld_shrinks_a_converged_set_and_grows_a_spread_one() {
+        let kld = KldParams { min_particles: 50, max_particles: 3000, ..Default::default() };
+        let params = ResampleParams { alpha: 1.0, ess_threshold: None, kld: Some(kld.clone()) };
+        let mut tight = line_of(1000, 0.0001);
+        resample_with(&mut tight, &params, &mut stream(&[5]));
+        assert_eq!(tight.len(), 50, "one bin → min_particles");
+        let mut spread = line_of(300, 0.5);
+        resample_with(&mut spread, &params, &mut stream(&[6]));
+        let bins = spread
+            .x
+            .iter()
+            .map(|x| (x / 0.5).floor() as i64)
+            .collect::<std::collections::BTreeSet<_>>()
+            .len();
+        assert_eq!(spread.len(), kld.particles_needed(bins), "stops at the bound for the bins it saw");
+        assert!(spread.len() > 300, "300 bins need more than 300 particles, got {}", spread.len());
+        assert!((spread.weights().iter().sum::<f32>() - 1.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn resample_kld_is_unbiased() {
+        let base = ParticleSet::from_weights(&[0.1, 0.2, 0.3, 0.4, 0.0, 0.0, 0.0, 0.0]);
+        let kld = KldParams { min_particles: 3, max_particles: 16, bin_size_m: 100.0, ..Default::default() };
+        let before = weighted_mean_x(&base);
+        let draws = 4000;
+        let mean_after: f32 = (0..draws)
+            .map(|d| {
+                let mut set = base.clone();
+                resample_kld(&mut set, 0.5, &kld, &mut stream(&[12, d]));
+                assert_eq!(set.len(), 3, "one bin → min_particles");
+                weighted_mean_x(&set)
+            })
+            .sum::<f32>()
+            / draws as f32;
+        assert!((mean_after - before).abs() < 0.05, "E[mean after] = {mean_after}, before = {before}");
     }
 }

@@ -1,6 +1,7 @@
 //! Transition (motion update): each particle applies the robot's odometry delta in its own frame,
 //! perturbed by Gaussian noise, as in PF-net's transition model.
 
+use crate::compose::{StepParams, expect_param};
 use crate::particles::set::ParticleSet;
 use crate::sense::Odometry;
 use crate::world::rng::stream;
@@ -27,6 +28,13 @@ pub struct TransitionParams {
 impl Default for TransitionParams {
     fn default() -> Self {
         Self { trans_noise_m: 0.01, rot_noise_deg: 5.0 }
+    }
+}
+
+impl StepParams for TransitionParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.trans_noise_m >= 0.0, "trans_noise_m", "a std-dev ≥ 0 m")?;
+        expect_param(self.rot_noise_deg >= 0.0, "rot_noise_deg", "a std-dev ≥ 0°")
     }
 }
 

@@ -22,7 +22,7 @@
 
 use crate::particles::{
     FilterHealth, Guard, InitParams, LikelihoodFieldParams, ParticleSet, PoseEstimate, ResampleParams, Task,
-    TransitionParams, draw_initial_set, estimate_pose, propagate, resample_soft, should_resample,
+    TransitionParams, draw_initial_set, estimate_pose, propagate, resample_with, should_resample,
     weigh_likelihood_field,
 };
 use crate::replay::error::ReplayError;
@@ -172,7 +172,7 @@ impl Localizer {
             Err(e) => tracing::warn!("replay localizer: {e}"),
         }
         if should_resample(&self.set, self.params.resample.ess_threshold) {
-            resample_soft(&mut self.set, self.params.resample.alpha, &mut self.rng);
+            resample_with(&mut self.set, &self.params.resample, &mut self.rng);
         }
         if let Some(estimate) = estimate_pose(&self.set) {
             self.estimate = estimate;

@@ -1,6 +1,7 @@
 //! A one-row depth camera: the paper's 90° depth image reduced to the strip at the sensor's
 //! height, cast on the fine grid (the `avoid` baseline and the agent's optional depth input).
 
+use crate::compose::{StepParams, expect_param};
 use crate::sense::raycast::RayGrid;
 use crate::world::{OnMap, Pose2, TruePose};
 use bevy::prelude::*;
@@ -23,6 +24,14 @@ pub struct DepthParams {
 impl Default for DepthParams {
     fn default() -> Self {
         Self { fov_deg: 90.0, columns: 56, min_m: 0.1, max_m: 10.0 }
+    }
+}
+
+impl StepParams for DepthParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.columns > 0, "columns", "at least 1 column")?;
+        expect_param(self.fov_deg > 0.0 && self.fov_deg < 180.0, "fov_deg", "a field of view in (0, 180)")?;
+        expect_param(self.min_m >= 0.0 && self.min_m < self.max_m, "min_m, max_m", "0 ≤ min_m < max_m")
     }
 }
 

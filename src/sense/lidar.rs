@@ -1,5 +1,6 @@
 //! Planar LiDAR: 228 rays over 240°, 0.05–5.6 m (the paper's sensor), cast on the fine grid.
 
+use crate::compose::{StepParams, expect_param};
 use crate::sense::raycast::RayGrid;
 use crate::world::{EpisodeRng, OnMap, Pose2, RobotParams, TruePose};
 use bevy::prelude::*;
@@ -48,6 +49,19 @@ impl Default for LidarParams {
             range_noise_std_m: 0.0,
             robots_block: false,
         }
+    }
+}
+
+impl StepParams for LidarParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.rays > 0, "rays", "at least 1 ray")?;
+        expect_param(self.fov_deg > 0.0 && self.fov_deg <= 360.0, "fov_deg", "a field of view in (0, 360]")?;
+        expect_param(
+            self.range_min_m >= 0.0 && self.range_min_m < self.range_max_m,
+            "range_min_m, range_max_m",
+            "0 ≤ range_min_m < range_max_m",
+        )?;
+        expect_param(self.range_noise_std_m >= 0.0, "range_noise_std_m", "a std-dev ≥ 0 m")
     }
 }
 

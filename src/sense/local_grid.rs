@@ -2,6 +2,7 @@
 //! egocentric occupancy image (0 = occupied, 0.5 = unknown, 1 = free), the input of PF-net's
 //! observation encoder and of the agent.
 
+use crate::compose::{StepParams, expect_param};
 use crate::sense::lidar::LidarScan;
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -30,6 +31,14 @@ pub struct LocalGridParams {
 impl Default for LocalGridParams {
     fn default() -> Self {
         Self { cells: 128, extent_m: 5.0, out_cells: 56, footprint_radius_m: 0.32 }
+    }
+}
+
+impl StepParams for LocalGridParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.cells > 0 && self.out_cells > 0, "cells, out_cells", "at least 1 cell")?;
+        expect_param(self.extent_m > 0.0, "extent_m", "an extent > 0 m")?;
+        expect_param(self.footprint_radius_m >= 0.0, "footprint_radius_m", "a radius ≥ 0 m")
     }
 }
 

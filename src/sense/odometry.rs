@@ -1,5 +1,6 @@
 //! Odometry: the robot's motion since the previous agent step, in its previous frame, with noise.
 
+use crate::compose::{StepParams, expect_param};
 use crate::world::{EpisodeRng, Pose2, PreviousPose, TruePose, wrap_angle};
 use bevy::prelude::*;
 use rand::Rng;
@@ -25,6 +26,13 @@ pub struct OdometryParams {
 impl Default for OdometryParams {
     fn default() -> Self {
         Self { trans_noise_m: 0.01, rot_noise_deg: 5.0 }
+    }
+}
+
+impl StepParams for OdometryParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.trans_noise_m >= 0.0, "trans_noise_m", "a std-dev ≥ 0 m")?;
+        expect_param(self.rot_noise_deg >= 0.0, "rot_noise_deg", "a std-dev ≥ 0°")
     }
 }
 

@@ -28,41 +28,50 @@ pub fn write_sweep(out: &Path, rows: &[SweepRow]) -> Result<(), SweepError> {
         message: format!("cannot encode the merged rows: {e}"),
     })?;
     write_atomically(&out.join("sweep.json"), json.as_bytes())?;
-    write_atomically(&out.join("sweep.csv"), csv(rows).as_bytes())?;
+    let table = csv(rows).map_err(|e| SweepError::JobFile {
+        path: out.join("sweep.csv"),
+        message: format!("cannot encode the merged rows: {e}"),
+    })?;
+    write_atomically(&out.join("sweep.csv"), &table)?;
     write_atomically(&out.join("sweep.md"), markdown(rows).as_bytes())?;
     Ok(())
 }
 
 /// One line per cell; an interval is empty with a single seed.
-pub fn csv(rows: &[SweepRow]) -> String {
-    let mut text = "schedule,localizer,policy,task,split,map,particles,episodes,n,seeds".to_owned();
+pub fn csv(rows: &[SweepRow]) -> Result<Vec<u8>, csv::Error> {
+    let mut writer = csv::Writer::from_writer(Vec::new());
+    let mut header: Vec<String> =
+        ["schedule", "localizer", "policy", "task", "split", "map", "particles", "episodes", "n", "seeds"]
+            .map(String::from)
+            .into();
     if let Some(r) = rows.first() {
-        for (name, _) in metrics(r) {
-            text += &format!(",{name}_mean,{name}_ci95");
-        }
+        header
+            .extend(metrics(r).iter().flat_map(|(name, _)| [format!("{name}_mean"), format!("{name}_ci95")]));
     }
-    text += ",wall_s\n";
+    header.push("wall_s".into());
+    writer.write_record(&header)?;
     for r in rows {
         let seeds: Vec<String> = r.seeds.iter().map(u64::to_string).collect();
-        text += &format!(
-            "{},{},{},{},{},\"{}\",{},{},{},\"{}\"",
-            r.schedule,
-            r.localizer,
-            r.policy,
-            task_name(r.task),
-            r.split,
-            r.map,
-            r.particles,
-            r.episodes,
-            r.n,
-            seeds.join(" ")
-        );
+        let mut record = vec![
+            r.schedule.clone(),
+            r.localizer.clone(),
+            r.policy.clone(),
+            task_name(r.task).to_owned(),
+            r.split.clone(),
+            r.map.clone(),
+            r.particles.to_string(),
+            r.episodes.to_string(),
+            r.n.to_string(),
+            seeds.join(" "),
+        ];
         for (_, m) in metrics(r) {
-            text += &format!(",{:.5},{}", m.mean, m.ci95.map_or(String::new(), |c| format!("{c:.5}")));
+            record.push(format!("{:.5}", m.mean));
+            record.push(m.ci95.map_or(String::new(), |c| format!("{c:.5}")));
         }
-        text += &format!(",{:.1}\n", r.wall_s);
+        record.push(format!("{:.1}", r.wall_s));
+        writer.write_record(&record)?;
     }
-    text
+    writer.into_inner().map_err(|e| e.into_error().into())
 }
 
 /// "mean ± half-width" scaled by `scale`, or just the mean with one seed.
