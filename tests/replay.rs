@@ -204,6 +204,13 @@ fn replay_cli_record_then_localize() {
     let init = format!("{},{},{}", first[0], first[1], first[2]);
     let with_init = [&localize[..], &["--init", &init, "--particles", "100"]].concat();
     run(parse(&with_init)).expect("--init x,y,θ runs");
+
+    // nav2-style KLD-sampling: the filter still tracks.
+    run(parse(&[&localize[..], &["--kld", "200,1000"]].concat())).expect("--kld MIN,MAX runs");
+    let text = std::fs::read_to_string(&est).expect("EST rewritten");
+    let estimates: Vec<EstimateLine> = text.lines().map(|l| serde_json::from_str(l).expect("line")).collect();
+    let errors = position_errors(&lines, &estimates);
+    assert!(errors[39] < 0.3, "KLD tracking run ends within 0.3 m: {errors:?}");
 }
 
 #[test]
@@ -225,6 +232,11 @@ fn replay_cli_rejects_bad_inputs_before_work() {
 
     let err = fails(&["--particles", "0"]);
     assert!(err.contains("--particles 0"), "zero particles named: {err}");
+    let err = fails(&["--kld", "900,100"]);
+    assert!(err.contains("--kld") && err.contains("MIN ≤ MAX"), "inverted --kld named: {err}");
+    let err =
+        Cli::try_parse_from([&base[..], &["--kld", "500"]].concat()).expect_err("one value").to_string();
+    assert!(err.contains("MIN,MAX"), "--kld format named: {err}");
     let err =
         Cli::try_parse_from([&base[..], &["--init", "1,2"]].concat()).expect_err("2 values").to_string();
     assert!(err.contains("--init") && err.contains("found 2"), "wrong --init count named: {err}");

@@ -6,11 +6,12 @@
 //! the first line's `truth` perturbed as the task prescribes; global needs neither. Every input
 //! is checked (map, every log line, the flags) before the filter runs.
 
-use crate::particles::{InitParams, ResampleParams, Task};
+use crate::particles::{InitParams, KldParams, ResampleParams, Task};
 use crate::replay::{EstimateLine, InitialGuess, Localizer, LocalizerParams, LogLine, read_log, to_jsonl};
 use crate::world::map::{load_ros_map, write_atomically};
 use crate::world::{Pose2, angle_error, wrap_angle};
 use anyhow::{Context, ensure};
+use bevy::prelude::default;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 
@@ -38,6 +39,10 @@ pub struct LocalizeArgs {
     /// Soft-resampling mix α in [0, 1] (PF-net: 0.5; 1 = classical hard resampling).
     #[arg(long)]
     pub alpha: Option<f32>,
+    /// Adapt the particle count by KLD-sampling between MIN and MAX particles, as nav2's AMCL
+    /// does (its defaults: 500,2000); the filter starts with MAX unless `--particles` is given.
+    #[arg(long, value_parser = parse_range, value_name = "MIN,MAX")]
+    pub kld: Option<(usize, usize)>,
     /// Where to write the estimates (JSON Lines {t, pose, cov, update_ms}, written atomically).
     #[arg(long)]
     pub out: PathBuf,
@@ -109,15 +114,22 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
 pub fn localizer_params(args: &LocalizeArgs) -> anyhow::Result<LocalizerParams> {
     ensure!(args.particles != Some(0), "--particles 0: expected at least 1 particle");
     let defaults = LocalizerParams::default();
+    let kld = args.kld.map(|(min_particles, max_particles)| KldParams {
+        min_particles,
+        max_particles,
+        ..default()
+    });
+    let particles = args.particles.or(kld.as_ref().map(|k| k.max_particles));
     let params = LocalizerParams {
-        init: InitParams { task: args.task, particles: args.particles, ..defaults.init },
+        init: InitParams { task: args.task, particles, ..defaults.init },
         resample: ResampleParams {
             alpha: args.alpha.unwrap_or(defaults.resample.alpha),
+            kld,
             ..defaults.resample
         },
         ..LocalizerParams::default()
     };
-    params.validate().context("--alpha: expected a value in [0, 1]")?;
+    params.validate().context("--alpha: expected a value in [0, 1]; --kld: expected 1 ≤ MIN ≤ MAX")?;
     Ok(params)
 }
 
@@ -162,6 +174,16 @@ fn parse_task(text: &str) -> Result<Task, String> {
 }
 
 /// `x,y,θ`: three comma-separated finite numbers (metres, metres, radians).
+/// `MIN,MAX` particle counts for `--kld`.
+fn parse_range(text: &str) -> Result<(usize, usize), String> {
+    let count =
+        |s: &str| s.trim().parse::<usize>().map_err(|_| format!("expected a particle count, found `{s}`"));
+    match text.split_once(',') {
+        Some((min, max)) => Ok((count(min)?, count(max)?)),
+        None => Err(format!("expected MIN,MAX (e.g. 500,2000), found `{text}`")),
+    }
+}
+
 fn parse_pose(text: &str) -> Result<Pose2, String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     let [x, y, yaw] = parts.as_slice() else {
