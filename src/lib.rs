@@ -1,7 +1,7 @@
 //! apfn: active robot localization on bevy_ecs.
 //!
 //! The stages, in dataflow order: the `world` (maps, robots), `sense` (LiDAR, occupancy grid,
-//! depth, odometry), `particles` (the filter), `agent` (policies), `act` (drive and physics),
+//! depth, odometry), `particles` (the filter), `belief` (its projection for the agent), `agent` (policies), `act` (drive and physics),
 //! then `episode` bookkeeping; `compose` turns RON files into schedules; `eval` writes results
 //! tables and `sweep` repeats them across seeds as independent jobs; `replay` runs the filter
 //! on recorded logs; `cli` is the binary's.
@@ -14,6 +14,8 @@ pub mod world;
 pub mod sense;
 
 pub mod particles;
+
+pub mod belief;
 
 pub mod agent;
 

@@ -74,3 +74,31 @@ fn same_seed_gives_the_same_trajectory() {
     };
     assert_eq!(run(), run(), "a seed must fix the whole run");
 }
+
+#[test]
+fn belief_crop_follows_the_filter_in_a_running_pipeline() {
+    let text = r#"Schedule(steps: [
+        ("episode_reset", ()), ("odometry", ()), ("lidar", ()),
+        ("init_particles", (task: tracking)), ("transition", ()), ("mcl_likelihood_field", ()),
+        ("resample", ()), ("estimate", ()),
+        ("belief_crop", (cells: 50, modes: 2)),
+        ("random_policy", ()), ("drive", ()), ("physics", ()),
+    ])"#;
+    let pipeline = Pipeline::parse(text, Path::new("belief.ron"), &standard_registry()).unwrap();
+    let loaded = small_scene().into_loaded(Path::new("tests/pipelines")).unwrap();
+    let (mut app, robots) = headless_app(&loaded, pipeline).unwrap();
+    for _ in 0..4 {
+        app.update();
+    }
+    for robot in robots {
+        let crop = app.world().get::<apfn::belief::BeliefCrop>(robot).unwrap();
+        let estimate = app.world().get::<PoseEstimate>(robot).unwrap().pose;
+        assert_eq!(crop.values.len(), 2 * apfn::belief::BELIEF_CHANNELS * 50 * 50);
+        assert_eq!(crop.centres[0], estimate, "crop 0 is centred on this step's estimate");
+        let weights = crop.channel(0, 1);
+        let near: f32 = (20..30).flat_map(|r| (20..30).map(move |c| r * 50 + c)).map(|k| weights[k]).sum();
+        assert!(near > 0.5, "a tracking belief sits within 0.5 m of its estimate: {near}");
+        let free = crop.channel(0, 0);
+        assert_eq!(free[25 * 50 + 25], 1.0, "the estimate stands in free space");
+    }
+}

@@ -5,6 +5,7 @@ use crate::act::{drive, physics};
 use crate::agent::{
     AvoidParams, GoalnavParams, TurnParams, avoid_policy, goalnav_policy, random_policy, turn_policy,
 };
+use crate::belief::{BeliefParams, belief_crop};
 use crate::compose::registry::{NoParams, Registry, SystemSpec};
 use crate::episode::{KidnapParams, episode_reset, kidnap, step_metrics};
 use crate::particles::{
@@ -140,6 +141,16 @@ pub fn standard_registry() -> Registry {
             &["PoseEstimate"],
         ),
         estimate,
+    )
+    .register::<BeliefParams, _, _>(
+        spec(
+            "belief_crop",
+            Belief,
+            "Reads ParticleSet, PoseEstimate, the map's NetworkMap. Writes BeliefCrop.",
+            &["ParticleSet", "PoseEstimate"],
+            &["BeliefCrop"],
+        ),
+        belief_crop,
     )
     .register::<NoParams, _, _>(
         spec(

@@ -3,6 +3,7 @@
 
 use crate::act::{Collided, DriveCommand, MapPhysics};
 use crate::agent::Action;
+use crate::belief::BeliefCrop;
 use crate::compose::error::ComposeError;
 use crate::compose::scene::{LoadedScene, NamedMap};
 use crate::episode::{Episode, EpisodeLog, StepError};
@@ -71,7 +72,12 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
                     (Robot, TruePose(start), PreviousPose(start), OnMap(map_entity), body, scenario, noise),
                     (Action::default(), DriveCommand::default(), Collided::default(), Episode::default()),
                     (LidarScan::default(), LocalGrid::default(), DepthStrip::default(), Odometry::default()),
-                    (ParticleSet::default(), PoseEstimate::default(), FilterHealth::default()),
+                    (
+                        ParticleSet::default(),
+                        PoseEstimate::default(),
+                        FilterHealth::default(),
+                        BeliefCrop::default(),
+                    ),
                     (StepError::default(), EpisodeLog::default()),
                 ))
                 .id();

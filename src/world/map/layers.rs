@@ -89,6 +89,24 @@ impl NetworkMap {
     }
 }
 
+impl NetworkMap {
+    /// Occupancy of the cell containing a world point; points off the map read as occupied (1),
+    /// as unknown cells do.
+    pub fn occupancy_at(&self, x: f32, y: f32) -> f32 {
+        let local = self.origin.between(&Pose2::new(x, y, 0.0));
+        self.occupancy_at_grid(local.x / self.resolution_m, local.y / self.resolution_m)
+    }
+
+    /// Occupancy at continuous grid coordinates (cells from the origin corner; cell (i, j) spans
+    /// [i, i+1) × [j, j+1)); off the map reads as occupied.
+    pub fn occupancy_at_grid(&self, gx: f32, gy: f32) -> f32 {
+        let on_map = gx >= 0.0 && gy >= 0.0 && gx < self.width as f32 && gy < self.height as f32;
+        // `as i32` first: f32 → usize is a slow multi-instruction conversion on x86-64.
+        let cell = || gy as i32 as usize * self.width + gx as i32 as usize;
+        if on_map { self.occupancy[cell()] } else { UNKNOWN_OCCUPANCY }
+    }
+}
+
 /// Overlaps of fine cells with coarse cells along one axis: (coarse index, fine index, length in
 /// fine cells), and the number of coarse cells.
 fn block_weights(fine_n: usize, ratio: f64) -> (Vec<(usize, usize, f64)>, usize) {
@@ -219,6 +237,18 @@ impl DistanceField {
 mod tests {
     use super::*;
     use crate::world::rng::stream;
+
+    #[test]
+    fn network_map_reads_occupancy_at_world_points_under_a_rotated_origin() {
+        let mut map = OccupancyMap::from_ascii(0.1, "..#\n...");
+        map.origin = Pose2::new(1.0, 2.0, PI / 2.0);
+        let net = NetworkMap::from_fine(&map, 0.1);
+        // Cell (2, 1) (top right of the drawing) lies 0.25 m along the origin's x (world +y) and
+        // 0.15 m along its y (world −x).
+        assert_eq!(net.occupancy_at(1.0 - 0.15, 2.0 + 0.25), 1.0, "the occupied cell");
+        assert_eq!(net.occupancy_at(1.0 - 0.05, 2.0 + 0.05), 0.0, "a free cell");
+        assert_eq!(net.occupancy_at(1.0 + 0.05, 2.0 + 0.05), 1.0, "off the map reads occupied");
+    }
 
     #[test]
     fn distance_field_matches_known_distances() {

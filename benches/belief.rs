@@ -1,0 +1,56 @@
+//! Belief projection (`belief::project_crop` via the crop centres of `belief::belief_modes`): the
+//! agent's 4 × 50 × 50 crop for a tracking-sized (300) and a global-sized (3,000) particle set on
+//! apartment 0, one crop (the paper's) and three (estimate + 2 modes). Throughput counts particles.
+
+use apfn::belief::{BELIEF_CHANNELS, BeliefParams, belief_modes, project_crop};
+use apfn::particles::{ParticleSet, estimate_pose};
+use apfn::world::Pose2;
+use apfn::world::map::NetworkMap;
+use apfn::world::map::procedural::{ApartmentParams, generate_apartment};
+use apfn::world::rng::stream;
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use rand::Rng;
+
+/// `n` particles spread uniformly over the map's extent, random weights.
+fn spread_set(n: usize, width_m: f32, height_m: f32) -> ParticleSet {
+    let mut rng = stream(&[9, n as u64]);
+    let poses: Vec<Pose2> = (0..n)
+        .map(|_| {
+            let (x, y) = (rng.random_range(0.0..width_m), rng.random_range(0.0..height_m));
+            Pose2::new(x, y, rng.random_range(-3.1..3.1))
+        })
+        .collect();
+    let mut set = ParticleSet::from_poses(&poses);
+    set.log_w = (0..n).map(|_| rng.random_range(-4.0..0.0)).collect();
+    set.normalise().expect("finite log-weights");
+    set
+}
+
+fn bench(c: &mut Criterion) {
+    let apartment = generate_apartment(0, &ApartmentParams::default());
+    let network = NetworkMap::from_fine(&apartment, 0.1);
+    let (width_m, height_m) = apartment.size_m();
+    let mut group = c.benchmark_group("belief_crop");
+    for n in [300, 3000] {
+        let set = spread_set(n, width_m, height_m);
+        let estimate = estimate_pose(&set).expect("non-empty").pose;
+        group.throughput(Throughput::Elements(n as u64));
+        for modes in [1, 3] {
+            let params = BeliefParams { modes, ..Default::default() };
+            let mut out = vec![0.0; modes * BELIEF_CHANNELS * params.cells * params.cells];
+            group.bench_with_input(BenchmarkId::new(format!("modes_{modes}"), n), &set, |b, set| {
+                b.iter(|| {
+                    let centres = belief_modes(set, &estimate, params.modes, params.mode_bin_m);
+                    let per_crop = out.len() / modes;
+                    for (centre, crop) in centres.iter().zip(out.chunks_mut(per_crop)) {
+                        project_crop(set, &network, centre, &params, crop);
+                    }
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,212 @@
+//! The agent's view of the belief (paper §III-B): the particles projected onto the 0.1 m grid as
+//! four channels — free space of the map, Σ weights per cell, Σ w·cos θ and Σ w·sin θ — cut out
+//! as a square crop centred on and rotated to a pose hypothesis (the estimate, and optionally
+//! further modes, see [`belief_modes`]).
+//!
+//! The paper projects the particles onto the whole map (H × W × 4) and then crops; projecting
+//! straight into the crop gives the same cells at O(particles + crop) instead of O(H·W) per
+//! step, so large maps cost nothing extra. Headings are stored relative to the crop's own
+//! heading, so a belief that turns with the robot looks the same to the agent.
+
+use crate::belief::modes::belief_modes;
+use crate::compose::{StepParams, expect_param};
+use crate::particles::{ParticleSet, PoseEstimate};
+use crate::world::map::NetworkMap;
+use crate::world::{OnMap, Pose2};
+use bevy::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Channels per crop, in order: free space (1 − occupancy of the network map, 0 off the map),
+/// Σ w, Σ w·cos(θ − θ_crop), Σ w·sin(θ − θ_crop).
+pub const BELIEF_CHANNELS: usize = 4;
+
+/// Crop geometry and how many hypotheses to look at.
+#[derive(Resource, Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct BeliefParams {
+    /// Side of each crop, cells (DESIGN: 50, i.e. 5 m at 0.1 m).
+    pub cells: usize,
+    /// Cell side, metres (DESIGN: 0.1, the network map's resolution).
+    pub resolution_m: f32,
+    /// Crops per robot: the estimate, then the `modes − 1` heaviest other modes (paper: 1, "just
+    /// using the mean position and orientation of the particles works well").
+    pub modes: usize,
+    /// Side of the square bins in which modes are found, metres (ours: 1.0).
+    pub mode_bin_m: f32,
+}
+
+impl Default for BeliefParams {
+    fn default() -> Self {
+        Self { cells: 50, resolution_m: 0.1, modes: 1, mode_bin_m: 1.0 }
+    }
+}
+
+impl StepParams for BeliefParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.cells > 0, "cells", "at least 1 cell")?;
+        expect_param(self.resolution_m > 0.0, "resolution_m", "a cell side > 0 m")?;
+        expect_param(self.modes > 0, "modes", "at least 1 crop (the estimate)")?;
+        expect_param(self.mode_bin_m > 0.0, "mode_bin_m", "a bin side > 0 m")
+    }
+}
+
+/// A robot's belief crops, ready to be stacked into a batch: `modes × 4 × cells × cells` values,
+/// row-major per channel (the NCHW layout of a network input). Each crop has the layout of
+/// `LocalGrid`: its centre pose at the crop's centre facing up, row 0 farthest ahead, column 0
+/// farthest to the left.
+#[derive(Component, Clone, Debug, Default, PartialEq)]
+pub struct BeliefCrop {
+    pub cells: usize,
+    /// The pose each crop is centred on and rotated to, in crop order.
+    pub centres: Vec<Pose2>,
+    pub values: Vec<f32>,
+}
+
+impl BeliefCrop {
+    /// Channel `channel` of crop `mode`: `cells²` values.
+    pub fn channel(&self, mode: usize, channel: usize) -> &[f32] {
+        let n = self.cells * self.cells;
+        let start = (mode * BELIEF_CHANNELS + channel) * n;
+        &self.values[start..start + n]
+    }
+}
+
+/// Fills one crop (4 channels of `cells²` in `out`) centred on `centre`: the kernel of
+/// [`belief_crop`].
+pub fn project_crop(
+    set: &ParticleSet,
+    map: &NetworkMap,
+    centre: &Pose2,
+    params: &BeliefParams,
+    out: &mut [f32],
+) {
+    let (n, res) = (params.cells, params.resolution_m);
+    let (area, half) = (n * n, n as f32 / 2.0);
+    out.fill(0.0);
+    let (free, rest) = out.split_at_mut(area);
+    let (weight, rest) = rest.split_at_mut(area);
+    let (cos, sin) = rest.split_at_mut(area);
+    // Crop cell centres → the network map's grid: one affine map, set up once per crop.
+    let frame = map.origin.between(centre);
+    let (fs, fc) = frame.yaw.sin_cos();
+    let to_grid = 1.0 / map.resolution_m;
+    for (row, cells) in free.chunks_mut(n).enumerate() {
+        let ahead = (half - row as f32 - 0.5) * res;
+        let (ax, ay) = (frame.x + fc * ahead, frame.y + fs * ahead);
+        for (col, cell) in cells.iter_mut().enumerate() {
+            let left = (half - col as f32 - 0.5) * res;
+            *cell = 1.0 - map.occupancy_at_grid((ax - fs * left) * to_grid, (ay + fc * left) * to_grid);
+        }
+    }
+    let (s0, c0) = centre.yaw.sin_cos();
+    for (k, w) in set.weights().into_iter().enumerate() {
+        let (dx, dy) = (set.x[k] - centre.x, set.y[k] - centre.y);
+        let (row, col) = (half - (c0 * dx + s0 * dy) / res, half - (c0 * dy - s0 * dx) / res);
+        if row >= 0.0 && col >= 0.0 && row < n as f32 && col < n as f32 {
+            let cell = row as usize * n + col as usize;
+            let (s, c) = (set.yaw[k] - centre.yaw).sin_cos();
+            weight[cell] += w;
+            cos[cell] += w * c;
+            sin[cell] += w * s;
+        }
+    }
+}
+
+/// Reads ParticleSet, PoseEstimate, OnMap → the map's NetworkMap, BeliefParams. Writes
+/// BeliefCrop (inserted on first use).
+pub fn belief_crop(
+    params: Res<BeliefParams>,
+    maps: Query<&NetworkMap>,
+    mut robots: Query<(&ParticleSet, &PoseEstimate, &OnMap, &mut BeliefCrop)>,
+) {
+    robots.par_iter_mut().for_each(|(set, estimate, on_map, mut crop)| {
+        let Ok(map) = maps.get(on_map.0) else {
+            tracing::warn!("belief_crop: map {:?} has no NetworkMap", on_map.0);
+            return;
+        };
+        let centres = belief_modes(set, &estimate.pose, params.modes, params.mode_bin_m);
+        let per_crop = BELIEF_CHANNELS * params.cells * params.cells;
+        crop.values.resize(per_crop * centres.len(), 0.0);
+        for (centre, out) in centres.iter().zip(crop.values.chunks_mut(per_crop)) {
+            project_crop(set, map, centre, &params, out);
+        }
+        crop.cells = params.cells;
+        crop.centres = centres;
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::tiny_room;
+    use bevy::ecs::system::RunSystemOnce;
+
+    fn room() -> NetworkMap {
+        NetworkMap::from_fine(&tiny_room(), 0.1)
+    }
+
+    fn crop(poses: &[Pose2], weights: &[f32], centre: Pose2, params: &BeliefParams) -> Vec<f32> {
+        let mut set = ParticleSet::from_poses(poses);
+        set.log_w = weights.iter().map(|w| w.ln()).collect();
+        let mut out = vec![f32::NAN; BELIEF_CHANNELS * params.cells * params.cells];
+        project_crop(&set, &room(), &centre, params, &mut out);
+        out
+    }
+
+    #[test]
+    fn particles_land_egocentrically_with_relative_headings() {
+        let params = BeliefParams { cells: 20, ..Default::default() };
+        let centre = Pose2::new(1.0, 0.7, std::f32::consts::FRAC_PI_2); // facing +y
+        let ahead = Pose2::new(1.0, 1.25, std::f32::consts::FRAC_PI_2); // 0.55 m ahead, same heading
+        let left = Pose2::new(0.75, 0.7, std::f32::consts::PI); // 0.25 m to the left, turned 90° left
+        let out = crop(&[centre, ahead, left], &[0.5, 0.3, 0.2], centre, &params);
+        let (area, n) = (400, 20);
+        let weight = &out[area..2 * area];
+        assert!((weight[10 * n + 10] - 0.5).abs() < 1e-6, "the centre particle sits at the crop centre");
+        assert!((weight[4 * n + 10] - 0.3).abs() < 1e-6, "0.55 m ahead → 5.5 rows up, row 4");
+        assert!((weight[10 * n + 7] - 0.2).abs() < 1e-6, "0.25 m left → 2.5 columns left, column 7");
+        let (cos, sin) = (&out[2 * area..3 * area], &out[3 * area..]);
+        assert!((cos[4 * n + 10] - 0.3).abs() < 1e-5 && sin[4 * n + 10].abs() < 1e-5, "same heading: cos");
+        assert!(cos[10 * n + 7].abs() < 1e-5 && (sin[10 * n + 7] - 0.2).abs() < 1e-5, "+90°: sin");
+        assert!((weight.iter().sum::<f32>() - 1.0).abs() < 1e-5, "all weight inside");
+    }
+
+    #[test]
+    fn free_space_channel_shows_walls_and_the_map_edge() {
+        let params = BeliefParams { cells: 40, ..Default::default() };
+        // Facing +x from (0.5, 0.75): the east wall (x ∈ [1.9, 2.0]) is 1.4–1.5 m ahead.
+        let out = crop(&[Pose2::new(0.5, 0.75, 0.0)], &[1.0], Pose2::new(0.5, 0.75, 0.0), &params);
+        let free = &out[..1600];
+        let at = |row: usize, col: usize| free[row * 40 + col];
+        assert_eq!(at(20, 20), 1.0, "the robot stands in free space");
+        assert_eq!(at(20 - 15, 20), 0.0, "1.45 m ahead: the east wall");
+        assert_eq!(at(0, 20), 0.0, "beyond the map: not free");
+    }
+
+    #[test]
+    fn particles_outside_the_crop_are_left_out() {
+        let params = BeliefParams { cells: 10, ..Default::default() };
+        let far = Pose2::new(1.8, 1.3, 0.0);
+        let out = crop(&[Pose2::new(0.5, 0.5, 0.0), far], &[0.6, 0.4], Pose2::new(0.5, 0.5, 0.0), &params);
+        assert!((out[100..200].iter().sum::<f32>() - 0.6).abs() < 1e-6, "only the near particle counts");
+    }
+
+    #[test]
+    fn belief_crop_system_writes_one_crop_per_mode() {
+        let mut world = World::new();
+        world.insert_resource(BeliefParams { cells: 16, modes: 2, ..Default::default() });
+        let map = world.spawn(room()).id();
+        let poses = [Pose2::new(0.5, 0.5, 0.0), Pose2::new(1.5, 1.0, 1.0)];
+        let mut set = ParticleSet::from_poses(&poses);
+        set.log_w = vec![0.3f32.ln(), 0.7f32.ln()];
+        let estimate = PoseEstimate { pose: Pose2::new(1.2, 0.85, 0.7), cov: Default::default() };
+        let robot = world.spawn((set, estimate, OnMap(map), BeliefCrop::default())).id();
+        world.run_system_once(belief_crop).expect("belief_crop runs");
+        let crop = world.get::<BeliefCrop>(robot).expect("crop");
+        assert_eq!(crop.values.len(), 2 * BELIEF_CHANNELS * 16 * 16, "2 modes × 4 channels × 16²");
+        assert_eq!(crop.centres[0], estimate.pose, "crop 0 is centred on the estimate");
+        assert!(crop.centres[1].distance(&poses[1]) < 1e-5, "crop 1 on the heavier mode: {:?}", crop.centres);
+        let heavy = crop.channel(1, 1);
+        assert!((heavy[8 * 16 + 8] - 0.7).abs() < 1e-6, "its particle at the centre");
+    }
+}
