@@ -1,8 +1,8 @@
 //! `ApfnPlugin`: adds apfn's resources, stages and a validated pipeline to any bevy `App`.
 
+use crate::act::PhysicsParams;
 use crate::compose::Pipeline;
 use crate::episode::CompletedEpisodes;
-use crate::world::SimClock;
 use bevy::prelude::*;
 
 /// The stages of one agent step, in order. Every registered system runs in one of them, so a
@@ -37,8 +37,8 @@ impl ApfnSet {
     ];
 }
 
-/// Adds the stages (chained in `ApfnSet` order), the simulated clock and the pipeline's systems
-/// to the `Update` schedule: one `app.update()` is one agent step.
+/// Adds the stages (chained in `ApfnSet` order), default physics timing (a scene's replaces it),
+/// the list of finished episodes and the pipeline's systems to the `Update` schedule: one `app.update()` is one agent step.
 pub struct ApfnPlugin {
     pub pipeline: Pipeline,
 }
@@ -46,17 +46,11 @@ pub struct ApfnPlugin {
 impl Plugin for ApfnPlugin {
     fn build(&self, app: &mut App) {
         use ApfnSet::*;
-        app.init_resource::<SimClock>()
-            .init_resource::<CompletedEpisodes>()
-            .configure_sets(Update, (Episode, Sense, Particles, Belief, Evaluate, Agent, Act).chain())
-            .add_systems(Update, tick_clock.after(Act));
+        app.init_resource::<CompletedEpisodes>()
+            .init_resource::<PhysicsParams>()
+            .configure_sets(Update, (Episode, Sense, Particles, Belief, Evaluate, Agent, Act).chain());
         self.pipeline.install(app);
     }
-}
-
-/// Reads nothing. Writes SimClock: one more agent step has passed.
-pub fn tick_clock(mut clock: ResMut<SimClock>) {
-    clock.step += 1;
 }
 
 /// A headless `App` running `pipeline` on the scene's maps and robots: one `update()` is one

@@ -124,6 +124,19 @@ fn broken_scene_names_file_line_and_column() {
 }
 
 #[test]
+fn out_of_range_apartment_params_name_the_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let text =
+        "Scene(maps: Procedural(split: seen, count: 1, params: (resolution_m: 2.0)), robots_per_map: 1)";
+    let scene = write(dir.path(), "wide.ron", text);
+    let err = apfn(&["run", "--scene", &scene, "--steps", "1"]).unwrap_err().to_string();
+    assert!(
+        err.contains("wide.ron") && err.contains("maps.params.resolution_m") && err.contains("0.005"),
+        "{err}"
+    );
+}
+
+#[test]
 fn unknown_system_is_rejected_with_suggestion() {
     let dir = tempfile::tempdir().unwrap();
     let systems = write(dir.path(), "s.ron", "// test\nSchedule(steps: [(\"odometri\", ())])");

@@ -128,11 +128,19 @@ fn whole_sweep_matches_job_by_job_and_reruns_stale_jobs() {
         assert_eq!(row(&a, name), row(&b, name), "{name}: the parallel run and --job give the same numbers");
     }
 
-    // Changing what the jobs depend on (episode length) makes their results stale: merge refuses them.
-    let text = std::fs::read_to_string(&file).unwrap().replace("steps: 8", "steps: 9");
-    std::fs::write(&file, text).unwrap();
-    let err = apfn(&["sweep", f, "--merge", "--out", a.to_str().unwrap()]).expect_err("stale").to_string();
-    assert!(err.contains("stale") && err.contains(NAMES[2]), "{err}");
+    // Changing what the jobs depend on (episode length, a step override) makes their results
+    // stale: merge refuses them.
+    let original = std::fs::read_to_string(&file).unwrap();
+    for changed in [
+        original.replace("steps: 8", "steps: 9"),
+        original.replace("steps: 8)", "steps: 8), overrides: [(\"resample\", (alpha: 1.0))]"),
+    ] {
+        assert_ne!(changed, original);
+        std::fs::write(&file, changed).unwrap();
+        let err =
+            apfn(&["sweep", f, "--merge", "--out", a.to_str().unwrap()]).expect_err("stale").to_string();
+        assert!(err.contains("stale") && err.contains(NAMES[2]), "{err}");
+    }
 }
 
 #[test]

@@ -26,6 +26,13 @@ impl Default for PhysicsParams {
     }
 }
 
+impl PhysicsParams {
+    /// Simulated seconds one agent step holds its action (paper: 0.6 s).
+    pub fn agent_step_s(&self) -> f32 {
+        self.dt_s * self.substeps as f32
+    }
+}
+
 /// Collision groups: walls in group 1, robots in group 2. Robots always meet walls and meet
 /// each other only when the scene asks for it.
 const WALLS: Group = Group::GROUP_1;

@@ -5,12 +5,13 @@
 //! simulator knew where the robot was; the filter under test only watched). `use_estimate: true`
 //! steers by the filter's `PoseEstimate` instead, for goal navigation as an active policy.
 
+use crate::act::PhysicsParams;
 use crate::agent::Action;
 use crate::compose::{StepParams, expect_param};
 use crate::episode::EpisodeStart;
 use crate::particles::PoseEstimate;
 use crate::world::map::{TraversableMap, plan_path};
-use crate::world::{OccupancyMap, OnMap, Pose2, RobotParams, ScenarioRng, SimClock, TruePose, wrap_angle};
+use crate::world::{OccupancyMap, OnMap, Pose2, RobotParams, ScenarioRng, TruePose, wrap_angle};
 use bevy::prelude::*;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -314,13 +315,13 @@ type GoalnavRobot = (
 );
 
 /// Reads TruePose (or PoseEstimate with `use_estimate`), EpisodeStart, OnMap, the map's
-/// OccupancyMap and TraversableMap, GoalnavParams, RobotParams, SimClock. Writes GoalPlan
+/// OccupancyMap and TraversableMap, GoalnavParams, RobotParams, PhysicsParams (the step length). Writes GoalPlan
 /// (inserted when missing), ScenarioRng, Action. Keeps each map's wider-margin traversable map
 /// (`clearance_m`) in a per-system cache, built on first use.
 pub fn goalnav_policy(
     params: Res<GoalnavParams>,
     limits: Res<RobotParams>,
-    clock: Res<SimClock>,
+    physics: Res<PhysicsParams>,
     mut commands: Commands,
     mut roomy_maps: Local<HashMap<Entity, Option<TraversableMap>>>,
     maps: Query<(&OccupancyMap, &TraversableMap)>,
@@ -341,7 +342,7 @@ pub fn goalnav_policy(
                 .or_insert_with(|| TraversableMap::build(map, limits.radius_m + params.clearance_m).ok());
             *plan = new_plan(pose, map, roomy.as_ref(), trav, &params, &mut rng.0);
         }
-        *action = follow(pose, plan, &params, &limits, clock.agent_step_s);
+        *action = follow(pose, plan, &params, &limits, physics.agent_step_s());
         if let Some(plan) = fresh {
             commands.entity(robot).insert(plan);
         }
@@ -374,7 +375,7 @@ mod tests {
         let mut world = World::new();
         world.insert_resource(GoalnavParams::default());
         world.insert_resource(RobotParams::default());
-        world.init_resource::<SimClock>();
+        world.insert_resource(PhysicsParams::default());
         let map_entity = world.spawn((map, trav)).id();
         let robot = world
             .spawn((OnMap(map_entity), TruePose(pose), ScenarioRng::seeded(seed), Action::default()))

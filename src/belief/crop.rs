@@ -113,7 +113,7 @@ pub fn project_crop(
 }
 
 /// Reads ParticleSet, PoseEstimate, OnMap → the map's NetworkMap, BeliefParams. Writes
-/// BeliefCrop (inserted on first use).
+/// BeliefCrop (spawned empty with every robot).
 pub fn belief_crop(
     params: Res<BeliefParams>,
     maps: Query<&NetworkMap>,

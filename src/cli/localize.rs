@@ -173,7 +173,6 @@ fn parse_task(text: &str) -> Result<Task, String> {
     }
 }
 
-/// `x,y,θ`: three comma-separated finite numbers (metres, metres, radians).
 /// `MIN,MAX` particle counts for `--kld`.
 fn parse_range(text: &str) -> Result<(usize, usize), String> {
     let count =
@@ -184,6 +183,7 @@ fn parse_range(text: &str) -> Result<(usize, usize), String> {
     }
 }
 
+/// `x,y,θ`: three comma-separated finite numbers (metres, metres, radians).
 fn parse_pose(text: &str) -> Result<Pose2, String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     let [x, y, yaw] = parts.as_slice() else {

@@ -6,7 +6,7 @@ use crate::agent::Action;
 use crate::cli::set_threads;
 use crate::compose::{ComposeError, LoadedScene, MapName, Pipeline, Scene, standard_registry};
 use crate::episode::Episode;
-use crate::particles::PoseEstimate;
+use crate::particles::{ParticleSet, PoseEstimate};
 use crate::plugin::headless_app;
 use crate::world::map::write_atomically;
 use crate::world::{OnMap, TruePose};
@@ -74,7 +74,7 @@ pub struct TrajectoryRow {
     pub episode_step: u32,
     /// True pose [x m, y m, yaw rad] after the step's motion.
     pub pose: [f32; 3],
-    /// The filter's estimate used for this step's action, when a filter runs.
+    /// The filter's estimate used for this step's action; `None` when the schedule runs no filter.
     pub estimate: Option<[f32; 3]>,
     /// Normalised action [linear, angular] in [−1, 1].
     pub action: [f32; 2],
@@ -206,6 +206,8 @@ fn snapshot(world: &mut World, robots: &[Entity], world_index: u64, step: u64) -
             let map = entity.get::<OnMap>().and_then(|m| world.get::<MapName>(m.0)).map(|n| n.0.clone());
             let episode = entity.get::<Episode>().copied().unwrap_or_default();
             let action = entity.get::<Action>().copied().unwrap_or_default();
+            // Every robot spawns with an empty set; `init_particles` fills it when a filter runs.
+            let filtering = entity.get::<ParticleSet>().is_some_and(|set| !set.is_empty());
             Some(TrajectoryRow {
                 world: world_index,
                 step,
@@ -214,7 +216,10 @@ fn snapshot(world: &mut World, robots: &[Entity], world_index: u64, step: u64) -
                 episode: episode.index,
                 episode_step: episode.step,
                 pose: [pose.x, pose.y, pose.yaw],
-                estimate: entity.get::<PoseEstimate>().map(|e| [e.pose.x, e.pose.y, e.pose.yaw]),
+                estimate: filtering
+                    .then(|| entity.get::<PoseEstimate>())
+                    .flatten()
+                    .map(|e| [e.pose.x, e.pose.y, e.pose.yaw]),
                 action: [action.linear, action.angular],
                 collided: entity.get::<Collided>().is_some_and(|c| c.0),
             })

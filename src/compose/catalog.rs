@@ -157,7 +157,7 @@ pub fn standard_registry() -> Registry {
             "step_metrics",
             Evaluate,
             "Reads TruePose, PoseEstimate, Episode. Writes StepError, EpisodeLog, CompletedEpisodes.",
-            &["PoseEstimate"],
+            &["EpisodeStart", "PoseEstimate"],
             &["StepError"],
         ),
         step_metrics,

@@ -122,6 +122,12 @@ impl Scene {
         if !positive(self.robot.radius_m) {
             return Err(invalid("robot.radius_m", "expected a positive radius in metres"));
         }
+        if let MapSource::Procedural { params, .. } = &self.maps
+            && let Err(e) = params.validate()
+        {
+            let field = format!("maps.params.{}", e.field);
+            return Err(invalid(&field, &format!("expected {}, got {}", e.expected, e.got)));
+        }
         let maps = match &self.maps {
             MapSource::Procedural { count: 0, .. } | MapSource::Ros { paths: _ } if self.map_count() == 0 => {
                 return Err(invalid("maps", "expected at least one map"));

@@ -119,8 +119,6 @@ pub struct CellMetrics {
     pub final_orient_err_rad: f32,
     /// Fraction of episodes with position error < 1 m at every step of the last 25 %.
     pub success_rate: f32,
-    /// Mean collisions per episode.
-    pub collisions_per_episode: f32,
 }
 
 /// Aggregates finished episodes; `None` when there are none.
@@ -143,8 +141,6 @@ pub fn summarize(records: &[EpisodeRecord]) -> Option<CellMetrics> {
         mean_orient_err_rad: mean(&|e| e.orient_err_rad) as f32,
         final_orient_err_rad: final_mean(&|e| e.orient_err_rad) as f32,
         success_rate: successes as f32 / records.len() as f32,
-        collisions_per_episode: records.iter().map(|r| r.log.collisions as f32).sum::<f32>()
-            / records.len() as f32,
     })
 }
 
@@ -190,7 +186,6 @@ mod tests {
         assert!((m.rmse_pos_m - 1.0).abs() < 1e-6, "√(4/4)");
         assert!((m.final_pos_err_m - 1.0).abs() < 1e-6, "finals 2 and 0");
         assert_eq!(m.success_rate, 0.5, "the first episode ends 2 m off");
-        assert_eq!(m.collisions_per_episode, 0.5);
         assert!(summarize(&[]).is_none());
     }
 

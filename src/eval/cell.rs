@@ -110,10 +110,13 @@ pub fn run_cell(eval: &LoadedEval, cell: &CellSpec, on_step: impl Fn()) -> Resul
     let (localizer, policy) = schedule_labels(eval, cell.schedule);
     let (mut app, _robots) = headless_app(scene, pipeline.clone())?;
     let world = app.world_mut();
+    // The config's count wins, then the schedule's own `init_particles (particles: …)`, then the
+    // task default.
+    let schedule_init = world.resource::<InitParams>().clone();
     let init = InitParams {
         task: cell.task,
-        particles: eval.config.particles,
-        ..world.resource::<InitParams>().clone()
+        particles: eval.config.particles.or(schedule_init.particles),
+        ..schedule_init
     };
     let particles = init.particle_count();
     world.insert_resource(init);
@@ -126,11 +129,14 @@ pub fn run_cell(eval: &LoadedEval, cell: &CellSpec, on_step: impl Fn()) -> Resul
     let mut records = std::mem::take(&mut world.resource_mut::<CompletedEpisodes>().0);
     let maps = world.query::<(Entity, &OccupancyMap)>().iter(world).map(|(e, m)| (e, m.clone())).collect();
     records.truncate(eval.config.episodes);
-    let m = summarize(&records).ok_or_else(|| ComposeError::Step {
-        path: schedule_path.clone(),
-        index: 0,
-        name: "step_metrics".into(),
-        message: "no episode finished: the schedule must contain `step_metrics`".into(),
+    let m = summarize(&records).ok_or_else(|| ComposeError::Scene {
+        path: eval.path.clone(),
+        field: "episode".into(),
+        message: format!(
+            "no episode of {} finished in {} agent steps",
+            schedule_path.display(),
+            cell_steps(eval, cell)
+        ),
     })?;
     let group = &eval.config.maps[cell.group];
     let row = ResultRow {

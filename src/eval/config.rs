@@ -165,12 +165,15 @@ impl EvalConfig {
             .iter()
             .map(|p| {
                 let pipeline = Pipeline::load(&base.join(p), &registry)?;
-                for needed in ["init_particles", "estimate"] {
+                // A filter to evaluate, and the episodes and per-step errors the table is made of
+                // (`step_metrics` itself needs `episode_reset`).
+                for needed in ["init_particles", "estimate", "step_metrics"] {
                     if !pipeline.names().contains(&needed) {
                         return Err(invalid(
                             "schedules",
                             format!(
-                                "{} has no `{needed}` step: it localizes nothing to evaluate",
+                                "{} has no `{needed}` step; an evaluated schedule needs `init_particles`, \
+                                 `estimate` and `step_metrics`",
                                 p.display()
                             ),
                         ));

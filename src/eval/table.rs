@@ -6,12 +6,13 @@ use crate::eval::cell::ResultRow;
 use crate::eval::episodes::EpisodeRow;
 use crate::particles::Task;
 use crate::world::map::write_atomically;
+use anyhow::Context;
 use serde::Serialize;
 use std::path::Path;
 
 /// Writes the four result files atomically into `out`.
 pub fn write_results(out: &Path, rows: &[ResultRow], episodes: &[EpisodeRow]) -> anyhow::Result<()> {
-    std::fs::create_dir_all(out)?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     write_atomically(&out.join("results.json"), serde_json::to_string_pretty(rows)?.as_bytes())?;
     write_atomically(&out.join("results.csv"), &csv(rows)?)?;
     write_atomically(&out.join("results.md"), markdown(rows).as_bytes())?;

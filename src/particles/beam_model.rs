@@ -19,7 +19,7 @@
 use crate::compose::{StepParams, expect_param};
 use crate::particles::likelihood_field::selected_beams;
 use crate::particles::set::{
-    FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet, record_observation,
+    FilterHealth, Guard, LikelihoodStats, ObservationModel, ParticleError, ParticleSet, record_observation,
 };
 use crate::sense::{LidarScan, RayGrid};
 use crate::world::OnMap;
@@ -170,7 +170,7 @@ pub fn mcl_beam_model(
             continue;
         };
         let outcome = weigh_beam_model(&mut set, scan, grid, &params);
-        record_observation("mcl_beam_model", outcome, &mut health, &mut stats);
+        record_observation(ObservationModel::BeamModel, outcome, &mut health, &mut stats);
     }
 }
 

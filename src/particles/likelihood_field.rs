@@ -11,7 +11,7 @@
 
 use crate::compose::{StepParams, expect_param};
 use crate::particles::set::{
-    FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet, record_observation,
+    FilterHealth, Guard, LikelihoodStats, ObservationModel, ParticleError, ParticleSet, record_observation,
 };
 use crate::sense::LidarScan;
 use crate::world::map::DistanceField;
@@ -218,7 +218,7 @@ pub fn mcl_likelihood_field(
             continue;
         };
         let outcome = weigh_likelihood_field(&mut set, scan, field, &map.origin, &params);
-        record_observation("mcl_likelihood_field", outcome, &mut health, &mut stats);
+        record_observation(ObservationModel::LikelihoodField, outcome, &mut health, &mut stats);
     }
 }
 

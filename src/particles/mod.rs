@@ -32,6 +32,7 @@ pub use resample::{
     ResampleParams, resample, resample_kld, resample_soft, resample_with, should_resample, systematic_indices,
 };
 pub use set::{
-    Degenerate, FilterHealth, Guard, LikelihoodStats, ParticleError, ParticleSet, record_observation,
+    Degenerate, FilterHealth, Guard, LikelihoodStats, ObservationModel, ParticleError, ParticleSet,
+    record_observation,
 };
 pub use transition::{TRANSITION_CHUNK, TransitionParams, propagate, transition};

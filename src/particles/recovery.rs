@@ -17,9 +17,10 @@
 
 use crate::compose::{StepParams, expect_param};
 use crate::episode::EpisodeStart;
+use crate::particles::beam_model::{BeamModelParams, add_log_beam_likelihoods};
 use crate::particles::likelihood_field::{LikelihoodFieldParams, add_log_likelihoods};
-use crate::particles::set::{FilterHealth, LikelihoodStats, ParticleError, ParticleSet};
-use crate::sense::LidarScan;
+use crate::particles::set::{FilterHealth, LikelihoodStats, ObservationModel, ParticleError, ParticleSet};
+use crate::sense::{LidarScan, RayGrid};
 use crate::world::map::{DistanceField, TraversableMap};
 use crate::world::{EpisodeRng, OccupancyMap, OnMap, Pose2};
 use bevy::prelude::*;
@@ -34,7 +35,7 @@ pub struct RecoveryParams {
     /// (Probabilistic Robotics / the common AMCL recovery setting: 0.001; nav2 defaults it to
     /// 0.0 = recovery off).
     pub alpha_slow: f32,
-    /// Rate of the short-term average w_fast, unitless in [0, 1], must exceed `alpha_slow`
+    /// Rate of the short-term average w_fast, unitless in [0, 1], at least `alpha_slow`
     /// (Probabilistic Robotics / the common AMCL recovery setting: 0.1; nav2 default 0.0 = off).
     pub alpha_fast: f32,
 }
@@ -52,6 +53,11 @@ impl StepParams for RecoveryParams {
             rate(self.alpha_slow) && rate(self.alpha_fast),
             "alpha_slow, alpha_fast",
             "rates in [0, 1]",
+        )?;
+        expect_param(
+            self.alpha_fast >= self.alpha_slow,
+            "alpha_fast",
+            "a rate ≥ alpha_slow (the short-term average)",
         )
     }
 }
@@ -156,13 +162,13 @@ pub fn recover(
     inject_uniform(set, p, stats.mean_log_likelihood, layers, rng, log_likelihood)
 }
 
-/// Reads LikelihoodStats, EpisodeStart, LidarScan, the map's OccupancyMap, TraversableMap and
-/// DistanceField, RecoveryParams, LikelihoodFieldParams. Writes RecoveryState, ParticleSet,
-/// EpisodeRng, FilterHealth.injected.
+/// Reads LikelihoodStats (and its model), EpisodeStart, LidarScan, the map's OccupancyMap,
+/// TraversableMap and DistanceField or RayGrid, RecoveryParams, the model's params. Writes
+/// RecoveryState, ParticleSet, EpisodeRng, FilterHealth.injected.
 pub fn augmented_recovery(
     params: Res<RecoveryParams>,
-    likelihood: Option<Res<LikelihoodFieldParams>>,
-    maps: Query<(&OccupancyMap, &TraversableMap, &DistanceField)>,
+    (field_params, beam_params): (Option<Res<LikelihoodFieldParams>>, Option<Res<BeamModelParams>>),
+    maps: Query<(&OccupancyMap, &TraversableMap, &DistanceField, &RayGrid)>,
     mut commands: Commands,
     mut robots: Query<(
         Entity,
@@ -171,14 +177,21 @@ pub fn augmented_recovery(
         (&mut ParticleSet, &mut EpisodeRng, &mut FilterHealth),
     )>,
 ) {
-    let likelihood = likelihood.map(|p| p.clone()).unwrap_or_default();
+    let field_params = field_params.map(|p| p.clone()).unwrap_or_default();
+    let beam_params = beam_params.map(|p| p.clone()).unwrap_or_default();
     for (robot, (on_map, scan, stats, start), state, (mut set, mut rng, mut health)) in &mut robots {
-        let Ok((map, traversable, field)) = maps.get(on_map.0) else { continue };
+        let Ok((map, traversable, field, rays)) = maps.get(on_map.0) else { continue };
         let mut next = state.as_deref().copied().unwrap_or_default();
         if start {
             next.log_w = None; // a new episode: the averages restart at its first update
         }
-        let weigh = |s: &mut ParticleSet| add_log_likelihoods(s, scan, field, &map.origin, &likelihood);
+        // Newcomers are weighed by the model that weighed the rest of the set.
+        let weigh = |s: &mut ParticleSet| match stats.model {
+            ObservationModel::LikelihoodField => {
+                add_log_likelihoods(s, scan, field, &map.origin, &field_params)
+            }
+            ObservationModel::BeamModel => add_log_beam_likelihoods(s, scan, rays, &beam_params),
+        };
         match recover(&mut next, stats, &params, &mut set, (map, traversable), &mut rng.0, weigh) {
             Ok(count) => health.injected += count as u32,
             Err(e) => tracing::warn!("augmented_recovery: {e}"),
@@ -214,7 +227,8 @@ mod tests {
         let layers = (TraversableMap::build(&map, 0.1).expect("room has space"), DistanceField::build(&map));
         let mut world = World::new();
         world.insert_resource(RecoveryParams::default());
-        let m = world.spawn((map, layers.0, layers.1)).id();
+        let rays = RayGrid::from_map(&map);
+        let m = world.spawn((map, layers.0, layers.1, rays)).id();
         let set = ParticleSet::from_poses(&[particles; 200]);
         let robot = world.spawn((OnMap(m), scan, set, EpisodeRng::seeded(3))).id();
         world.entity_mut(robot).insert(stats);
@@ -231,7 +245,7 @@ mod tests {
     #[test]
     fn augmented_recovery_injects_when_the_likelihood_collapses() {
         let wrong = Pose2::new(1.6, 0.4, -2.0);
-        let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 2 };
+        let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 2, ..Default::default() };
         // w_fast already e³ below w_slow, and the new scan fits far worse still.
         let state = RecoveryState { log_w: Some((-30.0, -33.0)), seen_updates: 1, ..Default::default() };
         let (mut world, robot) = world_with_robot(wrong, stats, Some(state));
@@ -253,37 +267,47 @@ mod tests {
     }
 
     #[test]
-    fn augmented_recovery_weighs_newcomers_by_the_scan() {
+    fn augmented_recovery_weighs_newcomers_by_the_scan_with_either_model() {
         // Every old particle is wrong and the scan says so: the best newcomers, weighed by the
-        // current scan, must carry the weight, pulling the weighted mean towards the truth.
+        // current scan with the model that weighed the set, must carry the weight, pulling the
+        // weighted mean towards the truth.
         let wrong = Pose2::new(1.6, 0.4, -2.0);
-        let field = DistanceField::build(&tiny_room());
+        let (field, rays) = (DistanceField::build(&tiny_room()), RayGrid::from_map(&tiny_room()));
         let mut scan = LidarScan::default();
-        cast_scan(&RayGrid::from_map(&tiny_room()), TRUTH, &[], &LidarParams::default(), &mut scan);
-        let mut probe = ParticleSet::from_poses(&[wrong]);
-        probe.log_w[0] = 0.0;
-        add_log_likelihoods(&mut probe, &scan, &field, &Pose2::default(), &Default::default())
-            .expect("field");
-        let stats = LikelihoodStats { mean_log_likelihood: probe.log_w[0], updates: 2 };
-        let state = RecoveryState { log_w: Some((-30.0, -33.0)), seen_updates: 1, ..Default::default() };
-        let (mut world, robot) = world_with_robot(wrong, stats, Some(state));
-        world.run_system_once(augmented_recovery).expect("system runs");
-        let set = world.get::<ParticleSet>(robot).expect("set");
-        let w = set.weights();
-        let old_mass: f32 = (0..set.len()).filter(|&k| set.pose(k) == wrong).map(|k| w[k]).sum();
-        assert!(old_mass < 0.01, "the wrong particles keep {old_mass} of the mass");
-        let best = (0..set.len()).max_by(|&a, &b| w[a].total_cmp(&w[b])).expect("particles");
-        assert!(
-            set.pose(best).distance(&TRUTH) < 0.5,
-            "the heaviest newcomer {:?} is near the truth",
-            set.pose(best)
-        );
+        cast_scan(&rays, TRUTH, &[], &LidarParams::default(), &mut scan);
+        for model in [ObservationModel::LikelihoodField, ObservationModel::BeamModel] {
+            let mut probe = ParticleSet::from_poses(&[wrong]);
+            probe.log_w[0] = 0.0;
+            match model {
+                ObservationModel::LikelihoodField => {
+                    add_log_likelihoods(&mut probe, &scan, &field, &Pose2::default(), &Default::default())
+                }
+                ObservationModel::BeamModel => {
+                    add_log_beam_likelihoods(&mut probe, &scan, &rays, &Default::default())
+                }
+            }
+            .expect("valid layers");
+            let stats = LikelihoodStats { mean_log_likelihood: probe.log_w[0], updates: 2, model };
+            let state = RecoveryState { log_w: Some((-30.0, -33.0)), seen_updates: 1, ..Default::default() };
+            let (mut world, robot) = world_with_robot(wrong, stats, Some(state));
+            world.run_system_once(augmented_recovery).expect("system runs");
+            let set = world.get::<ParticleSet>(robot).expect("set");
+            let w = set.weights();
+            let old_mass: f32 = (0..set.len()).filter(|&k| set.pose(k) == wrong).map(|k| w[k]).sum();
+            assert!(old_mass < 0.01, "{model:?}: the wrong particles keep {old_mass} of the mass");
+            let best = (0..set.len()).max_by(|&a, &b| w[a].total_cmp(&w[b])).expect("particles");
+            assert!(
+                set.pose(best).distance(&TRUTH) < 0.5,
+                "{model:?}: the heaviest newcomer {:?} is near the truth",
+                set.pose(best)
+            );
+        }
     }
 
     #[test]
     fn augmented_recovery_injects_nothing_when_steady() {
         let at = Pose2::new(0.5, 1.0, 0.3);
-        let stats = LikelihoodStats { mean_log_likelihood: -30.0, updates: 2 };
+        let stats = LikelihoodStats { mean_log_likelihood: -30.0, updates: 2, ..Default::default() };
         let state = RecoveryState { log_w: Some((-30.0, -30.0)), seen_updates: 1, ..Default::default() };
         let (mut world, robot) = world_with_robot(at, stats, Some(state));
         world.run_system_once(augmented_recovery).expect("system runs");
@@ -299,7 +323,7 @@ mod tests {
     #[test]
     fn augmented_recovery_restarts_at_episode_start_and_inserts_its_state() {
         let at = Pose2::new(0.5, 1.0, 0.3);
-        let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 9 };
+        let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 9, ..Default::default() };
         let collapsed = RecoveryState { log_w: Some((-30.0, -60.0)), seen_updates: 8, ..Default::default() };
         let (mut world, robot) = world_with_robot(at, stats, Some(collapsed));
         world.entity_mut(robot).insert(EpisodeStart);

@@ -21,7 +21,8 @@ pub struct ParticleSet {
     pub log_w: Vec<f32>,
 }
 
-/// Counts of the filter's guard events, so degenerate runs are visible in metrics and logs.
+/// Counts of the filter's guard events, so degenerate runs are visible (`apfn localize` reports
+/// them).
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FilterHealth {
     /// Times the weights were unusable (NaN everywhere or all zero) and were reset to uniform.
@@ -43,6 +44,29 @@ pub struct LikelihoodStats {
     pub mean_log_likelihood: f32,
     /// Observation updates that wrote `mean_log_likelihood` (0 = none yet).
     pub updates: u32,
+    /// The model that weighed the particles, so that a later step (augmented MCL) weighs new
+    /// particles on the same scale.
+    pub model: ObservationModel,
+}
+
+/// The observation models a classical filter step can weigh particles with.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ObservationModel {
+    /// `mcl_likelihood_field`.
+    #[default]
+    LikelihoodField,
+    /// `mcl_beam_model`.
+    BeamModel,
+}
+
+impl ObservationModel {
+    /// The system that runs this model.
+    pub fn system_name(self) -> &'static str {
+        match self {
+            ObservationModel::LikelihoodField => "mcl_likelihood_field",
+            ObservationModel::BeamModel => "mcl_beam_model",
+        }
+    }
 }
 
 impl ParticleSet {
@@ -58,10 +82,11 @@ impl ParticleSet {
     }
 }
 
-/// Books the outcome of [`ParticleSet::weigh_with`] on the robot: a reset to uniform counts as a
-/// degeneracy, a success updates the stats, an error is logged under `system`'s name.
+/// Books the outcome of [`ParticleSet::weigh_with`] by `model` on the robot: a reset to uniform
+/// counts as a degeneracy, a success updates the stats, an error is logged under the model's
+/// system name.
 pub fn record_observation(
-    system: &str,
+    model: ObservationModel,
     outcome: Result<(Guard, f32), ParticleError>,
     health: &mut FilterHealth,
     stats: &mut LikelihoodStats,
@@ -69,9 +94,9 @@ pub fn record_observation(
     match outcome {
         Ok((guard, mean_log_likelihood)) => {
             health.degeneracies += u32::from(guard == Guard::ResetToUniform);
-            *stats = LikelihoodStats { mean_log_likelihood, updates: stats.updates + 1 };
+            *stats = LikelihoodStats { mean_log_likelihood, updates: stats.updates + 1, model };
         }
-        Err(e) => tracing::warn!("{system}: {e}"),
+        Err(e) => tracing::warn!("{}: {e}", model.system_name()),
     }
 }
 

@@ -10,6 +10,9 @@ pub enum SweepError {
     #[error("cannot read {path}: {source}")]
     Read { path: PathBuf, source: std::io::Error },
 
+    #[error("cannot create the folder {path}: {source}")]
+    CreateDir { path: PathBuf, source: std::io::Error },
+
     /// The sweep file parsed but asks for something impossible (no seeds, colliding job names…).
     #[error("{path}: field `{field}`: {message}")]
     Invalid { path: PathBuf, field: String, message: String },

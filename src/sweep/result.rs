@@ -41,7 +41,7 @@ pub fn job_path(out: &Path, job: &Job) -> PathBuf {
 pub fn write_job_result(out: &Path, job: &Job, result: &JobResult) -> Result<PathBuf, SweepError> {
     let path = job_path(out, job);
     let dir = out.join("jobs");
-    std::fs::create_dir_all(&dir).map_err(|source| SweepError::Read { path: dir, source })?;
+    std::fs::create_dir_all(&dir).map_err(|source| SweepError::CreateDir { path: dir, source })?;
     let json = serde_json::to_string_pretty(result).map_err(|e| SweepError::JobFile {
         path: path.clone(),
         message: format!("cannot encode the result: {e}"),
@@ -76,7 +76,7 @@ pub fn job_status(sweep: &LoadedSweep, out: &Path, job: &Job) -> Result<JobStatu
 }
 
 /// Everything a job's numbers depend on, hashed: the schedule file's text, the task, the map
-/// group, the eval settings and the seed. Other cells and seeds of the sweep do not enter, so
+/// group, the eval settings (overrides and labels included) and the seed. Other cells and seeds of the sweep do not enter, so
 /// adding a seed or a schedule keeps the finished jobs.
 pub fn fingerprint(sweep: &LoadedSweep, job: &Job) -> Result<String, SweepError> {
     #[derive(Serialize)]
@@ -89,6 +89,8 @@ pub fn fingerprint(sweep: &LoadedSweep, job: &Job) -> Result<String, SweepError>
         particles: Option<usize>,
         episode: &'a crate::episode::EpisodeParams,
         robot: &'a crate::world::RobotParams,
+        overrides: &'a [(String, Box<ron::value::RawValue>)],
+        localizer: &'a Option<String>,
         seed: u64,
     }
     let config = &sweep.eval.config;
@@ -104,6 +106,8 @@ pub fn fingerprint(sweep: &LoadedSweep, job: &Job) -> Result<String, SweepError>
         particles: config.particles,
         episode: &config.episode,
         robot: &config.robot,
+        overrides: &config.overrides,
+        localizer: &config.localizer,
         seed: job.seed,
     };
     let bytes = serde_json::to_vec(&inputs).map_err(|e| SweepError::JobFile {

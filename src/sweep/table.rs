@@ -22,7 +22,7 @@ fn metrics(r: &SweepRow) -> [(&'static str, MeanCi); 6] {
 
 /// Writes the three files atomically into `out`.
 pub fn write_sweep(out: &Path, rows: &[SweepRow]) -> Result<(), SweepError> {
-    std::fs::create_dir_all(out).map_err(|source| SweepError::Read { path: out.to_owned(), source })?;
+    std::fs::create_dir_all(out).map_err(|source| SweepError::CreateDir { path: out.to_owned(), source })?;
     let json = serde_json::to_string_pretty(rows).map_err(|e| SweepError::JobFile {
         path: out.join("sweep.json"),
         message: format!("cannot encode the merged rows: {e}"),

@@ -1,12 +1,10 @@
-//! What exists before anything runs: poses, maps, robots, seeded randomness and simulated time.
+//! What exists before anything runs: poses, maps, robots, seeded randomness.
 
-pub mod clock;
 pub mod map;
 pub mod pose;
 pub mod rng;
 pub mod robot;
 
-pub use clock::SimClock;
 pub use map::{Cell, OccupancyMap};
 pub use pose::{Pose2, angle_error, circular_mean, wrap_angle};
 pub use rng::{EpisodeRng, ScenarioRng};

@@ -4,7 +4,8 @@ use bevy::prelude::Component;
 use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
 
-/// The random stream of one robot's episode: noise, particle draws, start poses, policies.
+/// The random stream of one robot's sensing and filtering: sensor noise, particle draws and
+/// transition noise (what happens to the robot draws from [`ScenarioRng`]).
 #[derive(Component, Clone, Debug)]
 pub struct EpisodeRng(pub Pcg64Mcg);
 
