@@ -28,7 +28,7 @@ pub struct LocalizeArgs {
     #[arg(long)]
     pub particles: Option<usize>,
     /// How much is known about the start: tracking, semi_global or global.
-    #[arg(long, default_value = "tracking", value_parser = parse_task)]
+    #[arg(long, value_enum, default_value = "tracking")]
     pub task: Task,
     /// Initial guess `x,y,θ` (metres, metres, radians) for tracking and semi_global.
     #[arg(long, value_parser = parse_pose, allow_hyphen_values = true, value_name = "X,Y,THETA")]
@@ -88,10 +88,10 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
     write_atomically(&args.out, to_jsonl(&estimates)?.as_bytes())?;
     let mean_ms = estimates.iter().map(|e| e.update_ms).sum::<f64>() / estimates.len() as f64;
     println!(
-        "localized {} scans ({} particles, task {:?}): {mean_ms:.2} ms per update; wrote {}",
+        "localized {} scans ({} particles, task {}): {mean_ms:.2} ms per update; wrote {}",
         estimates.len(),
         filter.particles().len(),
-        args.task,
+        args.task.name(),
         args.out.display()
     );
     if let Some(e) = truth_errors(&lines, &estimates) {
@@ -161,16 +161,6 @@ pub fn truth_errors(lines: &[LogLine], estimates: &[EstimateLine]) -> Option<Tru
         mean_heading_rad: pairs.iter().map(|p| p.1).sum::<f32>() / n,
         final_position_m,
     })
-}
-
-/// `tracking`, `semi_global` (or `semi-global`), `global`.
-fn parse_task(text: &str) -> Result<Task, String> {
-    match text {
-        "tracking" => Ok(Task::Tracking),
-        "semi_global" | "semi-global" => Ok(Task::SemiGlobal),
-        "global" => Ok(Task::Global),
-        other => Err(format!("expected tracking, semi_global or global, found `{other}`")),
-    }
 }
 
 /// `MIN,MAX` particle counts for `--kld`.

@@ -5,7 +5,6 @@
 use crate::episode::{EpisodeLog, EpisodeRecord, SUCCESS_RADIUS_M};
 use crate::eval::cell::ResultRow;
 use crate::eval::pixel_text::PixelText;
-use crate::eval::table::task_name;
 use crate::world::map::render;
 use crate::world::{OccupancyMap, Pose2};
 use image::{ImageFormat, Rgb, RgbImage, imageops};
@@ -42,12 +41,12 @@ fn draw_err(e: impl std::error::Error) -> FigureError {
 
 /// "mcl · turn · tracking · seen · episode 3".
 pub fn figure_title(row: &ResultRow, k: usize) -> String {
-    format!("{} · {} · {} · {} · episode {k}", row.localizer, row.policy, task_name(row.task), row.split)
+    format!("{} · {} · {} · {} · episode {k}", row.localizer, row.policy, row.task.name(), row.split)
 }
 
 /// "mcl_turn_tracking_seen_ep3.png".
 pub fn figure_file_name(row: &ResultRow, k: usize) -> String {
-    format!("{}_{}_{}_{}_ep{k}.png", row.localizer, row.policy, task_name(row.task), row.split)
+    format!("{}_{}_{}_{}_ep{k}.png", row.localizer, row.policy, row.task.name(), row.split)
 }
 
 pub fn encode_png(image: &RgbImage) -> Result<Vec<u8>, FigureError> {

@@ -14,4 +14,4 @@ pub use config::{EvalConfig, LoadedEval, MapGroup};
 pub use episodes::EpisodeRow;
 pub use figure::{FigureError, encode_png, episode_figure, figure_file_name, figure_title};
 pub use pixel_text::PixelText;
-pub use table::{csv, markdown, task_name, write_results};
+pub use table::{csv, markdown, write_results};

@@ -4,7 +4,6 @@
 
 use crate::eval::cell::ResultRow;
 use crate::eval::episodes::EpisodeRow;
-use crate::particles::Task;
 use crate::world::map::write_atomically;
 use anyhow::Context;
 use serde::Serialize;
@@ -29,14 +28,6 @@ pub fn csv<T: Serialize>(records: &[T]) -> anyhow::Result<Vec<u8>> {
     Ok(writer.into_inner()?)
 }
 
-pub fn task_name(task: Task) -> &'static str {
-    match task {
-        Task::Tracking => "tracking",
-        Task::SemiGlobal => "semi_global",
-        Task::Global => "global",
-    }
-}
-
 /// One table per localizer: each cell "mean pos cm / mean orient rad (success %)"; a policy row
 /// appears under a localizer only if that localizer ran it (missing task/split cells read "–").
 pub fn markdown(rows: &[ResultRow]) -> String {
@@ -50,7 +41,7 @@ pub fn markdown(rows: &[ResultRow]) -> String {
         }
         seen
     };
-    let tasks = unique(&|r| task_name(r.task).to_owned());
+    let tasks = unique(&|r| r.task.name().to_owned());
     let splits = unique(&|r| r.split.clone());
     let mut text = String::from(
         "Each cell: mean position error (cm) / mean |orientation error| (rad) over all steps of all \
@@ -74,7 +65,7 @@ pub fn markdown(rows: &[ResultRow]) -> String {
                     let cell = rows.iter().find(|r| {
                         r.localizer == localizer
                             && r.policy == policy
-                            && task_name(r.task) == task
+                            && r.task.name() == task
                             && &r.split == split
                     });
                     text += &match cell {
@@ -97,6 +88,7 @@ pub fn markdown(rows: &[ResultRow]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::particles::Task;
 
     #[test]
     fn csv_has_the_json_keys_as_header_and_quotes_commas() {

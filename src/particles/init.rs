@@ -15,16 +15,28 @@ use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 use std::f32::consts::PI;
 
-/// How much the filter knows about the start pose (paper §V).
-#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+/// How much the filter knows about the start pose (paper §V). Spelled `tracking`, `semi_global`
+/// and `global` in RON, JSON, tables and on the command line.
+#[derive(Serialize, Deserialize, clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
+#[value(rename_all = "snake_case")]
 pub enum Task {
     Tracking,
+    #[value(alias = "semi-global")]
     SemiGlobal,
     Global,
 }
 
 impl Task {
+    /// The task's name in files and tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Task::Tracking => "tracking",
+            Task::SemiGlobal => "semi_global",
+            Task::Global => "global",
+        }
+    }
+
     /// The paper's particle counts: tracking 300, semi-global 500, global 3,000.
     pub fn default_particles(self) -> usize {
         match self {
@@ -305,5 +317,12 @@ mod tests {
         let p: InitParams = ron::from_str("(task: semi_global, particles: Some(42))").expect("parses");
         assert_eq!((p.task, p.particle_count()), (Task::SemiGlobal, 42));
         assert!(ron::from_str::<InitParams>("(tsak: global)").is_err(), "unknown fields are rejected");
+        for task in [Task::Tracking, Task::SemiGlobal, Task::Global] {
+            let json = serde_json::to_string(&task).expect("serialises");
+            assert_eq!(json, format!("\"{}\"", task.name()), "files and tables spell it alike");
+            let parsed = <Task as clap::ValueEnum>::from_str(task.name(), false);
+            assert_eq!(parsed, Ok(task), "so does the command line");
+        }
+        assert_eq!(<Task as clap::ValueEnum>::from_str("semi-global", false), Ok(Task::SemiGlobal));
     }
 }

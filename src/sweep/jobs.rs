@@ -3,7 +3,7 @@
 //! `random__tracking__seen__seed1`. Any engine that can run `apfn sweep FILE --job N` for N in
 //! 0..jobs runs the sweep (see docs/cluster.md).
 
-use crate::eval::{CellSpec, ResultRow, cell_steps, run_cell, task_name};
+use crate::eval::{CellSpec, ResultRow, cell_steps, run_cell};
 use crate::sweep::config::LoadedSweep;
 use crate::sweep::error::SweepError;
 use crate::sweep::result::{JobResult, fingerprint};
@@ -30,11 +30,8 @@ pub fn jobs(sweep: &LoadedSweep) -> Result<Vec<Job>, SweepError> {
         for (group, map_group) in eval.config.maps.iter().enumerate() {
             for &task in &eval.config.tasks {
                 for &seed in &sweep.config.seeds {
-                    let name = format!(
-                        "{stem}__{}__{}__seed{seed}",
-                        task_name(task),
-                        safe(&map_group.split_label())
-                    );
+                    let name =
+                        format!("{stem}__{}__{}__seed{seed}", task.name(), safe(&map_group.split_label()));
                     if let Some(other) = jobs.iter().find(|j| j.name == name) {
                         return Err(SweepError::Invalid {
                             path: sweep.path.clone(),

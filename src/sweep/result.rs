@@ -2,7 +2,7 @@
 //! fingerprint of everything the job depends on, so a rerun skips finished jobs but redoes
 //! those whose schedule file or eval settings changed since.
 
-use crate::eval::{MapGroup, ResultRow, task_name};
+use crate::eval::{MapGroup, ResultRow};
 use crate::sweep::config::LoadedSweep;
 use crate::sweep::error::SweepError;
 use crate::sweep::jobs::Job;
@@ -99,7 +99,7 @@ pub fn fingerprint(sweep: &LoadedSweep, job: &Job) -> Result<String, SweepError>
         .map_err(|source| SweepError::Read { path: schedule_path.clone(), source })?;
     let inputs = Inputs {
         schedule,
-        task: task_name(job.cell.task),
+        task: job.cell.task.name(),
         maps: &config.maps[job.cell.group],
         episodes: config.episodes,
         robots_per_map: config.robots_per_map,

@@ -1,7 +1,6 @@
 //! Writes a merged sweep: sweep.json (rows), sweep.csv (one `_mean` and one `_ci95` column per
 //! metric) and sweep.md (one line per cell, "mean ± half-width").
 
-use crate::eval::task_name;
 use crate::sweep::error::SweepError;
 use crate::sweep::merge::SweepRow;
 use crate::sweep::stats::MeanCi;
@@ -56,7 +55,7 @@ pub fn csv(rows: &[SweepRow]) -> Result<Vec<u8>, csv::Error> {
             r.schedule.clone(),
             r.localizer.clone(),
             r.policy.clone(),
-            task_name(r.task).to_owned(),
+            r.task.name().to_owned(),
             r.split.clone(),
             r.map.clone(),
             r.particles.to_string(),
@@ -95,7 +94,7 @@ pub fn markdown(rows: &[SweepRow]) -> String {
             r.schedule,
             r.localizer,
             r.policy,
-            task_name(r.task),
+            r.task.name(),
             r.split,
             r.n,
             cell(r.mean_pos_err_m, 100.0, 1),
