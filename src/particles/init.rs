@@ -120,7 +120,8 @@ fn uniform_in_cells(cells: &[(u32, u32)], n: usize, map: &OccupancyMap, rng: &mu
         .collect()
 }
 
-/// Draws the initial set for `params.task` around the true pose `truth`. Errors on zero
+/// Draws the initial set for `params.task` around the true pose `truth`, as the paper does: the
+/// guess is `truth` perturbed by the tracking spread, then [`draw_around_guess`]. Errors on zero
 /// particles, or when a uniform draw is needed and the traversable map is empty.
 pub fn draw_initial_set(
     params: &InitParams,
@@ -129,18 +130,37 @@ pub fn draw_initial_set(
     traversable: &TraversableMap,
     rng: &mut impl Rng,
 ) -> Result<Initialised, ParticleError> {
+    let guess = match params.task {
+        Task::Global => None,
+        Task::Tracking | Task::SemiGlobal => {
+            let (sigma_m, sigma_rad) = tracking_sigmas(params);
+            Some(gaussian_around(truth, sigma_m, sigma_rad, rng))
+        }
+    };
+    draw_around_guess(params, guess, map, traversable, rng)
+}
+
+/// Draws the initial set for `params.task` around `guess`, used as it is (a user's initial
+/// pose): tracking is Gaussian around it, semi-global uniform over the traversable cells in the
+/// box around it (global when the box holds none), global (or no guess) uniform over the map.
+pub fn draw_around_guess(
+    params: &InitParams,
+    guess: Option<Pose2>,
+    map: &OccupancyMap,
+    traversable: &TraversableMap,
+    rng: &mut impl Rng,
+) -> Result<Initialised, ParticleError> {
     let n = params.particle_count();
     if n == 0 {
         return Err(ParticleError::ZeroParticles);
     }
-    let (sigma_m, sigma_rad) = (params.tracking_sigma_m.abs(), params.tracking_sigma_deg.abs().to_radians());
     let global = |rng: &mut _| match traversable.cells.is_empty() {
         true => Err(ParticleError::NoTraversableCells),
         false => Ok(ParticleSet::from_poses(&uniform_in_cells(&traversable.cells, n, map, rng))),
     };
-    match params.task {
-        Task::Tracking => {
-            let guess = gaussian_around(truth, sigma_m, sigma_rad, rng);
+    match (params.task, guess) {
+        (Task::Tracking, Some(guess)) => {
+            let (sigma_m, sigma_rad) = tracking_sigmas(params);
             let poses: Vec<Pose2> =
                 (0..n).map(|_| gaussian_around(&guess, sigma_m, sigma_rad, rng)).collect();
             Ok(Initialised {
@@ -149,8 +169,7 @@ pub fn draw_initial_set(
                 fell_back_to_global: false,
             })
         }
-        Task::SemiGlobal => {
-            let guess = gaussian_around(truth, sigma_m, sigma_rad, rng);
+        (Task::SemiGlobal, Some(guess)) => {
             let half = params.semi_global_box_m.abs() / 2.0;
             let in_box: Vec<(u32, u32)> = (traversable.cells.iter().copied())
                 .filter(|&(i, j)| {
@@ -164,8 +183,15 @@ pub fn draw_initial_set(
             let set = ParticleSet::from_poses(&uniform_in_cells(&in_box, n, map, rng));
             Ok(Initialised { set, guess: Some(guess), fell_back_to_global: false })
         }
-        Task::Global => Ok(Initialised { set: global(rng)?, guess: None, fell_back_to_global: false }),
+        (Task::Global, _) | (_, None) => {
+            Ok(Initialised { set: global(rng)?, guess: None, fell_back_to_global: false })
+        }
     }
+}
+
+/// The tracking spread (σ position in metres, σ heading in radians).
+fn tracking_sigmas(params: &InitParams) -> (f32, f32) {
+    (params.tracking_sigma_m.abs(), params.tracking_sigma_deg.abs().to_radians())
 }
 
 /// Reads TruePose, OnMap → the map's OccupancyMap + TraversableMap, InitParams. Writes empty

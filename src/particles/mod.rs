@@ -19,7 +19,7 @@ pub use beam_model::{
     weigh_beam_model,
 };
 pub use estimate::{PoseEstimate, estimate, estimate_pose};
-pub use init::{InitParams, Initialised, Task, draw_initial_set, init_particles};
+pub use init::{InitParams, Initialised, Task, draw_around_guess, draw_initial_set, init_particles};
 pub use kld::{KldHistogram, KldParams};
 pub use likelihood_field::{
     LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,

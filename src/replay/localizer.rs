@@ -22,17 +22,16 @@
 
 use crate::particles::{
     FilterHealth, Guard, InitParams, LikelihoodFieldParams, ParticleSet, PoseEstimate, ResampleParams, Task,
-    TransitionParams, draw_initial_set, estimate_pose, propagate, resample_with, should_resample,
-    weigh_likelihood_field,
+    TransitionParams, draw_around_guess, draw_initial_set, estimate_pose, propagate, resample_with,
+    should_resample, weigh_likelihood_field,
 };
 use crate::replay::error::ReplayError;
 use crate::replay::log::{EstimateLine, LogLine};
 use crate::sense::LidarScan;
 use crate::world::map::{DistanceField, TraversableMap};
 use crate::world::rng::stream;
-use crate::world::{OccupancyMap, Pose2, RobotParams, wrap_angle};
+use crate::world::{OccupancyMap, Pose2, RobotParams};
 use rand::Rng;
-use rand_distr::StandardNormal;
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -123,29 +122,17 @@ impl Localizer {
         let field = DistanceField::build(&map);
         let mut rng = stream(&[seed]);
         let task = params.init.task;
-        let (set, fell_back_to_global) = match (task, init) {
-            (Task::Global, _) => draw(&params.init, Task::Global, &map, &traversable, &mut rng)?,
+        let drawn = match (task, init) {
+            (Task::Global, _) => draw_around_guess(&params.init, None, &map, &traversable, &mut rng)?,
             (_, InitialGuess::Unknown) => return Err(ReplayError::NoInitialPose { task }),
             (_, InitialGuess::PerturbedTruth(truth)) => {
-                let drawn = draw_initial_set(&params.init, &truth, &map, &traversable, &mut rng)?;
-                (drawn.set, drawn.fell_back_to_global)
+                draw_initial_set(&params.init, &truth, &map, &traversable, &mut rng)?
             }
-            (Task::Tracking, InitialGuess::Pose(guess)) => {
-                (gaussian_set(&params.init, &guess, &mut rng), false)
-            }
-            (Task::SemiGlobal, InitialGuess::Pose(guess)) => {
-                let half = params.init.semi_global_box_m.abs() / 2.0;
-                let mut in_box = traversable.clone();
-                in_box.cells.retain(|&(i, j)| {
-                    let (x, y) = map.cell_center(i as usize, j as usize);
-                    (x - guess.x).abs() <= half && (y - guess.y).abs() <= half
-                });
-                match in_box.cells.is_empty() {
-                    true => (draw(&params.init, Task::Global, &map, &traversable, &mut rng)?.0, true),
-                    false => draw(&params.init, Task::Global, &map, &in_box, &mut rng)?,
-                }
+            (_, InitialGuess::Pose(guess)) => {
+                draw_around_guess(&params.init, Some(guess), &map, &traversable, &mut rng)?
             }
         };
+        let (set, fell_back_to_global) = (drawn.set, drawn.fell_back_to_global);
         let estimate = estimate_pose(&set).unwrap_or_default();
         let health = FilterHealth { reinitialisations: u32::from(fell_back_to_global), ..Default::default() };
         Ok(Self { map, field, traversable, set, params, rng, health, estimate, fell_back_to_global })
@@ -232,32 +219,6 @@ impl Localizer {
     pub fn params(&self) -> &LocalizerParams {
         &self.params
     }
-}
-
-/// A `task` draw with `init`'s particle count (the pose is unused by global draws).
-fn draw(
-    init: &InitParams,
-    task: Task,
-    map: &OccupancyMap,
-    traversable: &TraversableMap,
-    rng: &mut Pcg64Mcg,
-) -> Result<(ParticleSet, bool), ReplayError> {
-    let params = InitParams { task, ..init.clone() };
-    let drawn = draw_initial_set(&params, &Pose2::default(), map, traversable, rng)?;
-    Ok((drawn.set, drawn.fell_back_to_global))
-}
-
-/// Particles N(guess, σ²) on x, y and yaw, σ from the tracking spread.
-fn gaussian_set(init: &InitParams, guess: &Pose2, rng: &mut Pcg64Mcg) -> ParticleSet {
-    let (sigma_m, sigma_rad) = (init.tracking_sigma_m.abs(), init.tracking_sigma_deg.abs().to_radians());
-    let mut normal = || rng.sample::<f32, _>(StandardNormal);
-    let poses: Vec<Pose2> = (0..init.particle_count())
-        .map(|_| {
-            let (dx, dy, dyaw) = (sigma_m * normal(), sigma_m * normal(), sigma_rad * normal());
-            Pose2::new(guess.x + dx, guess.y + dy, wrap_angle(guess.yaw + dyaw))
-        })
-        .collect();
-    ParticleSet::from_poses(&poses)
 }
 
 #[cfg(test)]
