@@ -82,6 +82,11 @@ impl MapPhysics {
         self.insert_robot(pose, collider)
     }
 
+    /// Whether this robot's body collides with other robots (`add_robot`'s `collide_with_robots`).
+    pub fn collides_with_robots(&self, robot: PhysicsBody) -> bool {
+        self.0.colliders.get(robot.collider).is_some_and(|c| c.collision_groups().filter.contains(ROBOTS))
+    }
+
     /// Moves a robot's body out of this world into `to`, at `pose` and at rest (episodes that
     /// change maps); returns its handles there.
     pub fn transfer(&mut self, robot: PhysicsBody, to: &mut MapPhysics, pose: Pose2) -> PhysicsBody {

@@ -9,7 +9,7 @@ use crate::compose::scene::{LoadedScene, NamedMap};
 use crate::episode::{Episode, EpisodeLog, StepError};
 use crate::particles::{FilterHealth, ParticleSet, PoseEstimate};
 use crate::sense::{DepthStrip, LidarScan, LocalGrid, Odometry, RayGrid};
-use crate::world::map::{DistanceField, NetworkMap, TraversableMap};
+use crate::world::map::{DistanceField, NetworkMap, START_POSE_TRIES, TraversableMap};
 use crate::world::rng::stream;
 use crate::world::{EpisodeRng, OnMap, Pose2, PreviousPose, Robot, ScenarioRng, TruePose};
 use bevy::prelude::*;
@@ -21,9 +21,6 @@ pub struct MapName(pub String);
 
 /// Filter map resolution, metres (reference: 0.1 m cells for PF-net).
 pub const NETWORK_RESOLUTION_M: f32 = 0.1;
-
-/// Start poses are redrawn this many times to keep robots apart when they collide.
-const START_POSE_TRIES: usize = 100;
 
 /// Inserts the scene's world resources and spawns its maps and robots; returns the robots in
 /// spawn order. Each robot's random streams are keyed by (seed, map index, robot index).
@@ -47,10 +44,8 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
             let key = stream(&[scene.seed, map_index as u64, robot_index as u64]).random::<u64>();
             let (mut rng, noise) = (ScenarioRng::seeded(key), EpisodeRng::seeded(key));
             let min_gap = 2.0 * scene.robot.radius_m;
-            let start = (0..START_POSE_TRIES)
-                .map(|_| traversable.sample_pose(map, &mut rng.0))
-                .find(|p| !scene.robots_collide || starts.iter().all(|s| s.distance(p) > min_gap))
-                .unwrap_or_else(|| traversable.sample_pose(map, &mut rng.0));
+            let clear = |p: &Pose2| !scene.robots_collide || starts.iter().all(|s| s.distance(p) > min_gap);
+            let start = traversable.sample_pose_where(map, &mut rng.0, START_POSE_TRIES, clear);
             starts.push(start);
             let body = physics.add_robot(start, scene.robot.radius_m, scene.robots_collide);
             new_robots.push((start, body, rng, noise));

@@ -2,8 +2,8 @@
 
 use crate::act::{MapPhysics, PhysicsBody};
 use crate::particles::ParticleSet;
-use crate::world::map::TraversableMap;
-use crate::world::{OccupancyMap, OnMap, PreviousPose, ScenarioRng, TruePose};
+use crate::world::map::{START_POSE_TRIES, TraversableMap};
+use crate::world::{OccupancyMap, OnMap, Pose2, PreviousPose, RobotParams, ScenarioRng, TruePose};
 use bevy::prelude::*;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -37,11 +37,13 @@ pub struct Episode {
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct EpisodeStart;
 
-/// Reads EpisodeParams, the map's OccupancyMap and TraversableMap. Writes Episode, TruePose,
-/// PreviousPose, MapPhysics, ScenarioRng, EpisodeStart, and empties the ParticleSet so that
-/// `init_particles` draws a fresh one for the new episode.
+/// Reads EpisodeParams, RobotParams, the map's OccupancyMap and TraversableMap, the other robots'
+/// TruePose. Writes Episode, TruePose, PreviousPose, MapPhysics, ScenarioRng, EpisodeStart, and
+/// empties the ParticleSet so that `init_particles` draws a fresh one for the new episode.
+/// Robots that collide with each other restart at least two radii apart, as they spawn.
 pub fn episode_reset(
     params: Res<EpisodeParams>,
+    body_size: Res<RobotParams>,
     mut commands: Commands,
     mut maps: Query<(Entity, &OccupancyMap, &TraversableMap, &mut MapPhysics)>,
     mut robots: Query<(
@@ -55,6 +57,10 @@ pub fn episode_reset(
     )>,
 ) {
     let map_entities: Vec<Entity> = maps.iter().map(|(entity, ..)| entity).collect();
+    // Where every robot is (updated as robots restart), to keep colliding robots apart.
+    let mut positions: Vec<(Entity, Entity, Pose2)> =
+        robots.iter().map(|(robot, on_map, _, _, (pose, _), ..)| (robot, on_map.0, pose.0)).collect();
+    let min_gap = 2.0 * body_size.radius_m;
     for (robot, mut on_map, mut body, mut episode, (mut pose, mut previous), mut rng, particles) in
         &mut robots
     {
@@ -64,9 +70,19 @@ pub fn episode_reset(
                 n if params.change_maps && n > 1 => map_entities[rng.0.random_range(0..n)],
                 _ => on_map.0,
             };
+            let clear_of_others = |collides: bool| {
+                let others = &positions;
+                move |p: &Pose2| {
+                    !collides
+                        || others
+                            .iter()
+                            .all(|&(r, m, q)| r == robot || m != next_map || q.distance(p) > min_gap)
+                }
+            };
             let start = if next_map == on_map.0 {
                 let Ok((_, map, traversable, mut physics)) = maps.get_mut(on_map.0) else { continue };
-                let start = traversable.sample_pose(map, &mut rng.0);
+                let clear = clear_of_others(physics.collides_with_robots(*body));
+                let start = traversable.sample_pose_where(map, &mut rng.0, START_POSE_TRIES, clear);
                 physics.teleport(*body, start);
                 start
             } else {
@@ -75,12 +91,16 @@ pub fn episode_reset(
                 else {
                     continue;
                 };
-                let start = traversable.sample_pose(map, &mut rng.0);
+                let clear = clear_of_others(from.collides_with_robots(*body));
+                let start = traversable.sample_pose_where(map, &mut rng.0, START_POSE_TRIES, clear);
                 *body = from.transfer(*body, &mut to, start);
                 on_map.0 = next_map;
                 start
             };
             (pose.0, previous.0) = (start, start);
+            if let Some(entry) = positions.iter_mut().find(|(r, ..)| *r == robot) {
+                (entry.1, entry.2) = (next_map, start);
+            }
             *episode = Episode { index: episode.index + 1, step: 0 };
             if let Some(mut particles) = particles {
                 *particles = ParticleSet::default();
@@ -109,6 +129,7 @@ mod tests {
         let body = physics.add_robot(start, 0.18, false);
         let mut world = World::new();
         world.insert_resource(EpisodeParams { steps: 2, change_maps: true });
+        world.insert_resource(RobotParams::default());
         let map_entity = world.spawn((map, traversable, physics)).id();
         let robot = world
             .spawn((
@@ -140,10 +161,56 @@ mod tests {
     }
 
     #[test]
+    fn episode_reset_keeps_colliding_robots_apart() {
+        let map = tiny_room();
+        let (traversable, mut physics) =
+            (TraversableMap::build(&map, 0.18).unwrap(), MapPhysics::from_map(&map, 0.1));
+        let mut world = World::new();
+        world.insert_resource(EpisodeParams { steps: 1, change_maps: true });
+        world.insert_resource(RobotParams::default());
+        let starts = [
+            Pose2::new(0.4, 0.4, 0.0),
+            Pose2::new(1.5, 0.4, 0.0),
+            Pose2::new(0.4, 1.1, 0.0),
+            Pose2::new(1.5, 1.1, 0.0),
+        ];
+        let bodies: Vec<PhysicsBody> = starts.iter().map(|&p| physics.add_robot(p, 0.18, true)).collect();
+        assert!(physics.collides_with_robots(bodies[0]));
+        let map_entity = world.spawn((map, traversable, physics)).id();
+        let robots: Vec<Entity> = (0..4)
+            .map(|k| {
+                let pose = (TruePose(starts[k]), PreviousPose(starts[k]));
+                world
+                    .spawn((
+                        OnMap(map_entity),
+                        bodies[k],
+                        Episode::default(),
+                        pose,
+                        ScenarioRng::seeded(k as u64),
+                    ))
+                    .id()
+            })
+            .collect();
+        for _ in 0..30 {
+            world.run_system_once(episode_reset).unwrap();
+            let poses: Vec<Pose2> = robots.iter().map(|&r| world.get::<TruePose>(r).unwrap().0).collect();
+            for a in 0..4 {
+                for b in a + 1..4 {
+                    assert!(
+                        poses[a].distance(&poses[b]) > 0.36,
+                        "robots {a} and {b} restart overlapping: {poses:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
     fn episode_reset_moves_robots_between_maps() {
         let map = tiny_room();
         let mut world = World::new();
         world.insert_resource(EpisodeParams { steps: 1, change_maps: true });
+        world.insert_resource(RobotParams::default());
         let mut maps = Vec::new();
         for _ in 0..2 {
             let traversable = TraversableMap::build(&map, 0.18).unwrap();

@@ -20,6 +20,9 @@ pub struct NetworkMap {
     pub occupancy: Vec<f32>,
 }
 
+/// Start poses are redrawn up to this many times to keep robots that collide apart.
+pub const START_POSE_TRIES: usize = 100;
+
 /// Where the robot's centre may be: free cells of the fine grid farther than the robot radius
 /// from anything non-free, restricted to the largest connected component.
 #[derive(Component, Clone, Debug, PartialEq)]
@@ -174,6 +177,22 @@ impl TraversableMap {
         let (gx, gy) = (i as f32 + rng.random::<f32>(), j as f32 + rng.random::<f32>());
         let (x, y) = map.grid_to_world(gx, gy);
         Pose2::new(x, y, wrap_angle(rng.random_range(-PI..PI)))
+    }
+
+    /// The first of up to `tries` [`sample_pose`](Self::sample_pose) draws that `accept`s, or one
+    /// more draw when none does. Draws exactly once when the first is accepted, so an `accept`
+    /// that always holds leaves the random stream as one `sample_pose` would.
+    pub fn sample_pose_where(
+        &self,
+        map: &OccupancyMap,
+        rng: &mut impl Rng,
+        tries: usize,
+        accept: impl Fn(&Pose2) -> bool,
+    ) -> Pose2 {
+        (0..tries)
+            .map(|_| self.sample_pose(map, rng))
+            .find(accept)
+            .unwrap_or_else(|| self.sample_pose(map, rng))
     }
 }
 

@@ -12,7 +12,7 @@ mod ros_io;
 
 pub use astar::{plan_cells, plan_path};
 pub use error::MapError;
-pub use layers::{DistanceField, NetworkMap, TraversableMap};
+pub use layers::{DistanceField, NetworkMap, START_POSE_TRIES, TraversableMap};
 pub use occupancy::{Cell, OccupancyMap};
 pub use render::render;
 pub use ros_io::{
