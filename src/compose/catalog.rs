@@ -34,7 +34,7 @@ pub fn standard_registry() -> Registry {
         spec(
             "episode_reset",
             Episode,
-            "Reads EpisodeParams, maps. Writes Episode, TruePose, physics, EpisodeStart.",
+            "Reads EpisodeParams, maps, other robots' poses. Writes Episode, TruePose, physics, EpisodeStart; empties ParticleSet.",
             &[],
             &["EpisodeStart"],
         ),
