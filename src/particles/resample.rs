@@ -262,6 +262,22 @@ mod tests {
     }
 
     #[test]
+    fn resample_system_adapts_the_count_with_kld() {
+        let mut world = World::new();
+        let kld = KldParams { min_particles: 5, max_particles: 50, ..Default::default() };
+        world.insert_resource(ResampleParams { alpha: 0.5, ess_threshold: None, kld: Some(kld) });
+        let converged = world.spawn((line_of(40, 0.001), EpisodeRng::seeded(4))).id();
+        let spread = world.spawn((line_of(40, 0.5), EpisodeRng::seeded(5))).id();
+        world.run_system_once(resample).expect("resample runs");
+        assert_eq!(world.get::<ParticleSet>(converged).expect("set").len(), 5, "one bin → min_particles");
+        assert_eq!(
+            world.get::<ParticleSet>(spread).expect("set").len(),
+            50,
+            "40 bins → capped at max_particles"
+        );
+    }
+
+    #[test]
     fn resample_kld_is_unbiased() {
         let base = ParticleSet::from_weights(&[0.1, 0.2, 0.3, 0.4, 0.0, 0.0, 0.0, 0.0]);
         let kld = KldParams { min_particles: 3, max_particles: 16, bin_size_m: 100.0, ..Default::default() };
