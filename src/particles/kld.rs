@@ -74,12 +74,14 @@ impl KldParams {
     }
 }
 
-/// The occupied bins of a growing sample.
+/// The occupied bins of a growing sample, and the sample size they call for.
 pub struct KldHistogram<'a> {
     params: &'a KldParams,
     inv_bin_m: f32,
     inv_bin_rad: f32,
     bins: HashSet<(i32, i32, i32)>,
+    /// `params.particles_needed(bins.len())`, recomputed only when a bin opens.
+    needed: usize,
 }
 
 impl<'a> KldHistogram<'a> {
@@ -89,18 +91,21 @@ impl<'a> KldHistogram<'a> {
             inv_bin_m: 1.0 / params.bin_size_m,
             inv_bin_rad: 1.0 / params.bin_size_deg.to_radians(),
             bins: HashSet::default(),
+            needed: params.particles_needed(0),
         }
     }
 
     /// Adds one particle's bin.
     pub fn insert(&mut self, x: f32, y: f32, yaw: f32) {
         let bin = |v: f32, inv: f32| (v * inv).floor() as i32;
-        self.bins.insert((bin(x, self.inv_bin_m), bin(y, self.inv_bin_m), bin(yaw, self.inv_bin_rad)));
+        if self.bins.insert((bin(x, self.inv_bin_m), bin(y, self.inv_bin_m), bin(yaw, self.inv_bin_rad))) {
+            self.needed = self.params.particles_needed(self.bins.len());
+        }
     }
 
     /// Whether a sample of `count` particles is large enough for the bins seen so far.
     pub fn is_enough(&self, count: usize) -> bool {
-        count >= self.params.particles_needed(self.bins.len())
+        count >= self.needed
     }
 }
 
