@@ -40,10 +40,11 @@ fn bench(c: &mut Criterion) {
             let mut out = vec![0.0; modes * BELIEF_CHANNELS * params.cells * params.cells];
             group.bench_with_input(BenchmarkId::new(format!("modes_{modes}"), n), &set, |b, set| {
                 b.iter(|| {
-                    let centres = belief_modes(set, &estimate, params.modes, params.mode_bin_m);
+                    let weights = set.weights();
+                    let centres = belief_modes(set, &weights, &estimate, params.modes, params.mode_bin_m);
                     let per_crop = out.len() / modes;
                     for (centre, crop) in centres.iter().zip(out.chunks_mut(per_crop)) {
-                        project_crop(set, &network, centre, &params, crop);
+                        project_crop(set, &weights, &network, centre, &params, crop);
                     }
                 })
             });

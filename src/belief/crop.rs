@@ -72,9 +72,11 @@ impl BeliefCrop {
 }
 
 /// Fills one crop (4 channels of `cells²` in `out`) centred on `centre`: the kernel of
-/// [`belief_crop`].
+/// [`belief_crop`]. `weights` are the set's normalised weights (`set.weights()`, computed once
+/// for all of a robot's crops).
 pub fn project_crop(
     set: &ParticleSet,
+    weights: &[f32],
     map: &NetworkMap,
     centre: &Pose2,
     params: &BeliefParams,
@@ -99,7 +101,7 @@ pub fn project_crop(
         }
     }
     let (s0, c0) = centre.yaw.sin_cos();
-    for (k, w) in set.weights().into_iter().enumerate() {
+    for (k, &w) in weights.iter().enumerate() {
         let (dx, dy) = (set.x[k] - centre.x, set.y[k] - centre.y);
         let (row, col) = (half - (c0 * dx + s0 * dy) / res, half - (c0 * dy - s0 * dx) / res);
         if row >= 0.0 && col >= 0.0 && row < n as f32 && col < n as f32 {
@@ -124,11 +126,12 @@ pub fn belief_crop(
             tracing::warn!("belief_crop: map {:?} has no NetworkMap", on_map.0);
             return;
         };
-        let centres = belief_modes(set, &estimate.pose, params.modes, params.mode_bin_m);
+        let weights = set.weights();
+        let centres = belief_modes(set, &weights, &estimate.pose, params.modes, params.mode_bin_m);
         let per_crop = BELIEF_CHANNELS * params.cells * params.cells;
         crop.values.resize(per_crop * centres.len(), 0.0);
         for (centre, out) in centres.iter().zip(crop.values.chunks_mut(per_crop)) {
-            project_crop(set, map, centre, &params, out);
+            project_crop(set, &weights, map, centre, &params, out);
         }
         crop.cells = params.cells;
         crop.centres = centres;
@@ -149,7 +152,7 @@ mod tests {
         let mut set = ParticleSet::from_poses(poses);
         set.log_w = weights.iter().map(|w| w.ln()).collect();
         let mut out = vec![f32::NAN; BELIEF_CHANNELS * params.cells * params.cells];
-        project_crop(&set, &room(), &centre, params, &mut out);
+        project_crop(&set, &set.weights(), &room(), &centre, params, &mut out);
         out
     }
 

@@ -16,15 +16,22 @@ struct BinSums {
 }
 
 /// `count` crop centres: `estimate`, then the weighted mean poses (circular mean heading) of the
-/// `count − 1` heaviest `bin_m` bins other than the estimate's own. With fewer such bins the
+/// `count − 1` heaviest `bin_m` bins other than the estimate's own, by the set's normalised
+/// `weights`. With fewer such bins the
 /// estimate is repeated, so every robot gets the same number of crops (a fixed batch shape).
-pub fn belief_modes(set: &ParticleSet, estimate: &Pose2, count: usize, bin_m: f32) -> Vec<Pose2> {
+pub fn belief_modes(
+    set: &ParticleSet,
+    weights: &[f32],
+    estimate: &Pose2,
+    count: usize,
+    bin_m: f32,
+) -> Vec<Pose2> {
     if count <= 1 {
         return vec![*estimate];
     }
     let bin = |x: f32, y: f32| ((x / bin_m).floor() as i64, (y / bin_m).floor() as i64);
     let mut bins: HashMap<(i64, i64), BinSums> = HashMap::default();
-    for (k, w) in set.weights().into_iter().enumerate() {
+    for (k, &w) in weights.iter().enumerate() {
         let (s, c) = set.yaw[k].sin_cos();
         let sums = bins.entry(bin(set.x[k], set.y[k])).or_default();
         *sums = BinSums {
@@ -63,7 +70,7 @@ mod tests {
         let mut set = ParticleSet::from_poses(&poses);
         set.log_w = [0.4f32, 0.2, 0.2, 0.2].iter().map(|w| w.ln()).collect();
         let estimate = Pose2::new(0.3, 0.3, 0.1);
-        let modes = belief_modes(&set, &estimate, 3, 1.0);
+        let modes = belief_modes(&set, &set.weights(), &estimate, 3, 1.0);
         assert_eq!(modes[0], estimate);
         assert!((modes[1].x - 5.3).abs() < 1e-5 && (modes[1].y - 0.4).abs() < 1e-5, "{modes:?}");
         assert!(
@@ -78,7 +85,7 @@ mod tests {
         let set = ParticleSet::from_poses(&[Pose2::new(0.2, 0.2, 0.0)]);
         let estimate = Pose2::new(0.2, 0.2, 0.0);
         assert_eq!(
-            belief_modes(&set, &estimate, 3, 1.0),
+            belief_modes(&set, &set.weights(), &estimate, 3, 1.0),
             vec![estimate; 3],
             "the only bin is the estimate's"
         );
