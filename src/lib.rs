@@ -23,6 +23,8 @@ pub mod act;
 
 pub mod episode;
 
+pub mod nn;
+
 pub mod compose;
 
 pub mod eval;

@@ -3,6 +3,7 @@
 pub mod eval;
 pub mod localize;
 pub mod map;
+pub mod pfnet;
 pub mod record;
 pub mod run;
 pub mod sweep;
@@ -33,6 +34,9 @@ pub enum Command {
     Localize(localize::LocalizeArgs),
     /// Run an eval config for many seeds as independent jobs; merge to mean ± 95 % CI tables.
     Sweep(sweep::SweepArgs),
+    /// PF-net, the learned observation model: size, check against the Keras reference, speed.
+    #[command(subcommand)]
+    Pfnet(pfnet::PfNetCommand),
     /// List the registered systems with their parameters.
     #[command(subcommand)]
     Systems(systems::SystemsCommand),
@@ -47,6 +51,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Record(args) => record::run(args),
         Command::Localize(args) => localize::run(args),
         Command::Sweep(args) => sweep::run(args),
+        Command::Pfnet(cmd) => pfnet::run(cmd),
         Command::Systems(cmd) => systems::run(cmd),
     }
 }

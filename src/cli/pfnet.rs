@@ -1,0 +1,165 @@
+//! `apfn pfnet info | verify | bench`: PF-net's size, its check against the Keras reference,
+//! and its speed (one filter step or one training step), each printed as one JSON object.
+
+use crate::cli::set_threads;
+use crate::nn::adam::{Adam, AdamConfig};
+use crate::nn::pfnet::{GradBuffers, PfNet, PfNetConfig, PoseLoss, StepBatch, Workspaces, verify};
+use anyhow::Context;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(clap::Subcommand, Clone, Debug, PartialEq)]
+pub enum PfNetCommand {
+    /// Parameter counts per part and in total.
+    Info {
+        /// `paper`, `compact`, or a RON file holding a `PfNetConfig`.
+        #[arg(long, default_value = "paper")]
+        config: String,
+    },
+    /// Compare our network with the Keras reference's outputs, loss and gradients.
+    Verify {
+        /// The reference folder (weights.safetensors, case.safetensors).
+        #[arg(long, default_value = "../shared/reference/pfnet_oracle")]
+        reference: PathBuf,
+    },
+    /// Time one filter step (observation encoder + K likelihoods), or with `--train` one training step.
+    Bench(BenchArgs),
+}
+
+#[derive(clap::Args, Clone, Debug, PartialEq)]
+pub struct BenchArgs {
+    /// Particles per filter step (with `--train`: per sequence step).
+    #[arg(long, default_value_t = 3000)]
+    pub particles: usize,
+    /// `paper`, `compact`, or a RON file holding a `PfNetConfig`.
+    #[arg(long, default_value = "paper")]
+    pub config: String,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Timed repetitions (after two untimed ones); the median is reported.
+    #[arg(long, default_value_t = 10)]
+    pub reps: usize,
+    /// Time a training step (forward, backward, Adam) instead of a filter step.
+    #[arg(long)]
+    pub train: bool,
+    /// Sequences per training batch.
+    #[arg(long, default_value_t = 8)]
+    pub batch: usize,
+    /// Filter steps per training sequence.
+    #[arg(long, default_value_t = 25)]
+    pub steps: usize,
+}
+
+pub fn run(cmd: PfNetCommand) -> anyhow::Result<()> {
+    match cmd {
+        PfNetCommand::Info { config } => {
+            let model = PfNet::new(load_config(&config)?, 0)
+                .map_err(|e| anyhow::anyhow!("--config {config}: {e}"))?;
+            println!("{}", serde_json::to_string(&model.param_counts())?);
+        }
+        PfNetCommand::Verify { reference } => {
+            let report =
+                verify(&reference).with_context(|| format!("verifying against {}", reference.display()))?;
+            println!("{}", serde_json::to_string(&report)?);
+        }
+        PfNetCommand::Bench(args) => bench(&args)?,
+    }
+    Ok(())
+}
+
+/// A named configuration or a RON file.
+pub fn load_config(name: &str) -> anyhow::Result<PfNetConfig> {
+    if let Some(config) = PfNetConfig::named(name) {
+        return Ok(config);
+    }
+    let path = Path::new(name);
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("--config {name}: expected `paper`, `compact` or a readable RON file"))?;
+    let config: PfNetConfig =
+        ron::from_str(&text).with_context(|| format!("{}: not a PfNetConfig", path.display()))?;
+    config.check().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(config)
+}
+
+fn bench(args: &BenchArgs) -> anyhow::Result<()> {
+    set_threads(args.threads)?;
+    anyhow::ensure!(
+        (1..=1_000_000).contains(&args.particles),
+        "--particles: expected 1 to 1,000,000, found {}",
+        args.particles
+    );
+    anyhow::ensure!(args.reps >= 1, "--reps: expected at least 1");
+    let mut model =
+        PfNet::new(load_config(&args.config)?, 0).map_err(|e| anyhow::anyhow!("--config: {e}"))?;
+    let pool = Workspaces::for_current_pool();
+    let mut rng = Pcg64Mcg::seed_from_u64(1);
+    let mut uniform = |n: usize| (0..n).map(|_| rng.random::<f32>()).collect::<Vec<f32>>();
+    let timings = if args.train {
+        let steps = args.batch * args.steps;
+        anyhow::ensure!(
+            (1..=100_000).contains(&steps),
+            "--batch × --steps: expected 1 to 100,000 filter steps"
+        );
+        let k = args.particles;
+        let (obs, maps) = (uniform(steps * model.obs_len()), uniform(steps * k * model.local_map_len()));
+        let poses = uniform(steps * (k + 1) * 3);
+        let states: Vec<[f32; 3]> = poses[..steps * k * 3].chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
+        let targets: Vec<[f32; 3]> = poses[steps * k * 3..].chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
+        let batch = StepBatch { obs: &obs, maps: &maps, states: &states, targets: &targets, k };
+        let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / steps as f32 };
+        let mut adam = Adam::new(AdamConfig::default(), model.params.len());
+        let mut grads = GradBuffers::default();
+        time(args.reps, || {
+            model.train_step(&batch, &loss, &mut adam, &mut grads, &pool);
+        })
+    } else {
+        let k = args.particles;
+        let (obs, maps) = (uniform(model.obs_len()), uniform(k * model.local_map_len()));
+        let owner = vec![0u32; k];
+        let (mut obs_features, mut loglik) = (vec![0.0; model.obs_feature_len()], vec![0.0; k]);
+        time(args.reps, || {
+            model.encode_observations_par(&obs, &mut obs_features, &pool);
+            model.log_likelihoods_exact(&obs_features, &owner, &maps, &mut loglik, &pool);
+        })
+    };
+    let ms = median(timings) * 1e3;
+    let mut out = serde_json::json!({ "ms_per_step": round(ms), "peak_rss_mb": peak_rss_mb() });
+    if !args.train {
+        out["likelihoods_per_s"] = serde_json::json!(round(args.particles as f64 / (ms / 1e3)));
+    }
+    println!("{out}");
+    Ok(())
+}
+
+/// Seconds per call of `f`, after two untimed calls that size every buffer.
+fn time(reps: usize, mut f: impl FnMut()) -> Vec<f64> {
+    f();
+    f();
+    (0..reps)
+        .map(|_| {
+            let started = Instant::now();
+            f();
+            started.elapsed().as_secs_f64()
+        })
+        .collect()
+}
+
+fn median(mut xs: Vec<f64>) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    xs[xs.len() / 2]
+}
+
+fn round(x: f64) -> f64 {
+    (x * 100.0).round() / 100.0
+}
+
+/// This process's peak resident memory (Linux `VmHWM`), MB; `null` where unavailable.
+pub fn peak_rss_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(round(kb / 1024.0))
+}

@@ -1,0 +1,426 @@
+//! 2-D convolution (NCHW, square kernel, stride, dilation, TensorFlow padding) as im2col + one GEMM
+//! per sample. The GEMM puts the narrow output-channel side on the rows, `y_n[c_out × P] = W[c_out × K]
+//! · cols[K × P]` (K = c_in·k·k taps, P = oh·ow pixels), and writes straight into y's channel slice.
+
+use crate::nn::gemm::{MatMut, MatRef, matmul};
+
+/// TensorFlow's padding modes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Padding {
+    Same,
+    Valid,
+}
+
+impl Padding {
+    /// (output length, padding before) for one spatial axis, TensorFlow's rule.
+    pub fn output_and_pad_before(
+        self,
+        input: usize,
+        kernel: usize,
+        stride: usize,
+        dilation: usize,
+    ) -> (usize, usize) {
+        assert!(kernel >= 1 && stride >= 1 && dilation >= 1, "kernel, stride and dilation must be ≥ 1");
+        let span = (kernel - 1) * dilation + 1;
+        match self {
+            Padding::Same => {
+                let out = input.div_ceil(stride);
+                // TF puts the odd pixel of padding after, hence floor for the before side.
+                let total = ((out.max(1) - 1) * stride + span).saturating_sub(input);
+                (out, total / 2)
+            }
+            Padding::Valid => (if input >= span { (input - span) / stride + 1 } else { 0 }, 0),
+        }
+    }
+}
+
+/// 2-D convolution, square kernel, NCHW, weights [c_out][c_in][kh][kw], bias [c_out].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Conv2d {
+    pub c_in: usize,
+    pub c_out: usize,
+    pub kernel: usize,
+    pub stride: usize,
+    pub dilation: usize,
+    pub padding: Padding,
+}
+
+/// Output size and the top/left padding of one call.
+struct Geometry {
+    h: usize,
+    w: usize,
+    oh: usize,
+    ow: usize,
+    pad_top: usize,
+    pad_left: usize,
+}
+
+impl Geometry {
+    fn pixels(&self) -> usize {
+        self.oh * self.ow
+    }
+}
+
+/// The outputs `o < out` whose tap `o·stride + offset` lands inside `0..input`, as a range.
+fn valid_range(out: usize, input: usize, offset: isize, stride: usize) -> (usize, usize) {
+    let s = stride as isize;
+    let lo = if offset >= 0 { 0 } else { ((-offset + s - 1) / s) as usize };
+    let last = input as isize - 1 - offset;
+    let hi = if last < 0 { 0 } else { out.min((last / s) as usize + 1) };
+    (lo.min(hi), hi)
+}
+
+impl Conv2d {
+    pub fn output_size(&self, h: usize, w: usize) -> (usize, usize) {
+        let g = self.geometry(h, w);
+        (g.oh, g.ow)
+    }
+
+    pub fn weight_len(&self) -> usize {
+        self.c_out * self.c_in * self.kernel * self.kernel
+    }
+
+    /// Rows of the im2col matrix: one per (c_in, kh, kw) tap.
+    fn taps(&self) -> usize {
+        self.c_in * self.kernel * self.kernel
+    }
+
+    fn geometry(&self, h: usize, w: usize) -> Geometry {
+        let (oh, pad_top) = self.padding.output_and_pad_before(h, self.kernel, self.stride, self.dilation);
+        let (ow, pad_left) = self.padding.output_and_pad_before(w, self.kernel, self.stride, self.dilation);
+        Geometry { h, w, oh, ow, pad_top, pad_left }
+    }
+
+    /// Calls `f(col, x, len)` for every run of in-bounds taps of one sample: `cols[col + j]` reads
+    /// `x_n[x + j·stride]` for `j < len`. Taps not visited fall in the padding (zero).
+    fn for_each_run(&self, g: &Geometry, mut f: impl FnMut(usize, usize, usize)) {
+        let (k, s, d, p) = (self.kernel, self.stride, self.dilation, g.pixels());
+        for c in 0..self.c_in {
+            for ki in 0..k {
+                let (oy_lo, oy_hi) = valid_range(g.oh, g.h, (ki * d) as isize - g.pad_top as isize, s);
+                for kj in 0..k {
+                    let (ox_lo, ox_hi) = valid_range(g.ow, g.w, (kj * d) as isize - g.pad_left as isize, s);
+                    if ox_lo == ox_hi {
+                        continue;
+                    }
+                    let row = ((c * k + ki) * k + kj) * p;
+                    let ix = ox_lo * s + kj * d - g.pad_left;
+                    for oy in oy_lo..oy_hi {
+                        let iy = oy * s + ki * d - g.pad_top;
+                        f(row + oy * g.ow + ox_lo, (c * g.h + iy) * g.w + ix, ox_hi - ox_lo);
+                    }
+                }
+            }
+        }
+    }
+
+    /// cols [K × P] ← taps of x_n [c_in][h][w], zero in the padding.
+    fn im2col(&self, g: &Geometry, x_n: &[f32], cols: &mut [f32]) {
+        cols.fill(0.0);
+        let s = self.stride;
+        self.for_each_run(g, |col, x, len| {
+            let dst = &mut cols[col..col + len];
+            if s == 1 {
+                dst.copy_from_slice(&x_n[x..x + len]);
+            } else {
+                for (d, v) in dst.iter_mut().zip(x_n[x..].iter().step_by(s)) {
+                    *d = *v;
+                }
+            }
+        });
+    }
+
+    /// dx_n [c_in][h][w] += scatter of dcols [K × P] (the adjoint of `im2col`).
+    fn col2im(&self, g: &Geometry, dcols: &[f32], dx_n: &mut [f32]) {
+        let s = self.stride;
+        self.for_each_run(g, |col, x, len| {
+            let src = &dcols[col..col + len];
+            if s == 1 {
+                for (d, v) in dx_n[x..x + len].iter_mut().zip(src) {
+                    *d += *v;
+                }
+            } else {
+                for (d, v) in dx_n[x..].iter_mut().step_by(s).zip(src) {
+                    *d += *v;
+                }
+            }
+        });
+    }
+
+    /// Shared length checks of forward/backward; `y_len` is y's (or dy's) length.
+    fn check_shapes(
+        &self,
+        weight: &[f32],
+        x: &[f32],
+        n: usize,
+        g: &Geometry,
+        y_len: usize,
+        y_slice: (usize, usize),
+    ) {
+        let (yc, yo) = y_slice;
+        assert!(self.kernel >= 1 && self.stride >= 1 && self.dilation >= 1, "degenerate conv {self:?}");
+        assert_eq!(weight.len(), self.weight_len(), "weight length");
+        assert_eq!(x.len(), n * self.c_in * g.h * g.w, "x length");
+        assert!(yo + self.c_out <= yc, "channel slice {yo}+{} exceeds {yc} channels", self.c_out);
+        assert_eq!(y_len, n * yc * g.pixels(), "y length");
+    }
+
+    /// x [n][c_in][h][w] → writes (overwrites) channels y_offset..y_offset+c_out of y [n][y_channels][oh][ow].
+    #[allow(clippy::too_many_arguments)]
+    pub fn forward(
+        &self,
+        weight: &[f32],
+        bias: &[f32],
+        x: &[f32],
+        n: usize,
+        h: usize,
+        w: usize,
+        y: &mut [f32],
+        y_channels: usize,
+        y_offset: usize,
+        scratch: &mut Vec<f32>,
+    ) {
+        let g = self.geometry(h, w);
+        self.check_shapes(weight, x, n, &g, y.len(), (y_channels, y_offset));
+        assert_eq!(bias.len(), self.c_out, "bias length");
+        let (k, p) = (self.taps(), g.pixels());
+        if scratch.len() < k * p {
+            scratch.resize(k * p, 0.0);
+        }
+        let cols = &mut scratch[..k * p];
+        let wm = MatRef::row_major(weight, self.c_out, k);
+        for (x_n, y_n) in x.chunks_exact(self.c_in * h * w).zip(y.chunks_exact_mut(y_channels * p)) {
+            self.im2col(&g, x_n, cols);
+            let y_slice = &mut y_n[y_offset * p..(y_offset + self.c_out) * p];
+            matmul(MatMut::row_major(y_slice, self.c_out, p), wm, MatRef::row_major(cols, k, p), false);
+            for (row, &b) in y_slice.chunks_exact_mut(p).zip(bias) {
+                row.iter_mut().for_each(|v| *v += b);
+            }
+        }
+    }
+
+    /// Reads dy's channel slice; accumulates (+=) into dweight, dbias and (if Some) dx [n][c_in][h][w].
+    #[allow(clippy::too_many_arguments)]
+    pub fn backward(
+        &self,
+        weight: &[f32],
+        x: &[f32],
+        n: usize,
+        h: usize,
+        w: usize,
+        dy: &[f32],
+        y_channels: usize,
+        y_offset: usize,
+        dweight: &mut [f32],
+        dbias: &mut [f32],
+        mut dx: Option<&mut [f32]>,
+        scratch: &mut Vec<f32>,
+    ) {
+        let g = self.geometry(h, w);
+        self.check_shapes(weight, x, n, &g, dy.len(), (y_channels, y_offset));
+        assert_eq!(dweight.len(), self.weight_len(), "dweight length");
+        assert_eq!(dbias.len(), self.c_out, "dbias length");
+        if let Some(dx) = dx.as_deref() {
+            assert_eq!(dx.len(), x.len(), "dx length");
+        }
+        let (k, p, x_len) = (self.taps(), g.pixels(), self.c_in * h * w);
+        let need = if dx.is_some() { 2 * k * p } else { k * p };
+        if scratch.len() < need {
+            scratch.resize(need, 0.0);
+        }
+        let (cols, dcols) = scratch[..need].split_at_mut(k * p);
+        let wm = MatRef::row_major(weight, self.c_out, k);
+        for i in 0..n {
+            let x_n = &x[i * x_len..(i + 1) * x_len];
+            let dy_n = &dy[(i * y_channels + y_offset) * p..(i * y_channels + y_offset + self.c_out) * p];
+            let dym = MatRef::row_major(dy_n, self.c_out, p);
+            self.im2col(&g, x_n, cols);
+            // dW [c_out × K] += dy_n [c_out × P] · colsᵀ [P × K]
+            matmul(MatMut::row_major(dweight, self.c_out, k), dym, MatRef::row_major(cols, k, p).t(), true);
+            for (db, row) in dbias.iter_mut().zip(dy_n.chunks_exact(p)) {
+                *db += row.iter().sum::<f32>();
+            }
+            if let Some(dx) = dx.as_deref_mut() {
+                // dcols [K × P] = Wᵀ [K × c_out] · dy_n [c_out × P], then scatter back onto the pixels.
+                matmul(MatMut::row_major(dcols, k, p), wm.t(), dym, false);
+                self.col2im(&g, dcols, &mut dx[i * x_len..(i + 1) * x_len]);
+            }
+        }
+    }
+}
+
+/// Keras/TensorFlow kernel [kh][kw][c_in][c_out] (HWIO) → ours [c_out][c_in][kh][kw].
+pub fn weight_from_hwio(hwio: &[f32], kernel: usize, c_in: usize, c_out: usize) -> Vec<f32> {
+    let k = kernel;
+    assert_eq!(hwio.len(), k * k * c_in * c_out, "HWIO kernel length");
+    let mut ours = vec![0.0; hwio.len()];
+    for ki in 0..k {
+        for kj in 0..k {
+            for c in 0..c_in {
+                for o in 0..c_out {
+                    ours[((o * c_in + c) * k + ki) * k + kj] = hwio[((ki * k + kj) * c_in + c) * c_out + o];
+                }
+            }
+        }
+    }
+    ours
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::gradcheck::{assert_close, numerical_grad, test_values};
+
+    const TOL: f64 = 1e-4;
+
+    fn f64s(v: &[f32]) -> Vec<f64> {
+        v.iter().map(|&a| f64::from(a)).collect()
+    }
+
+    /// Direct f64 convolution: [n][c_out][oh][ow], skipping taps in the padding.
+    fn naive(conv: &Conv2d, wt: &[f64], b: &[f64], x: &[f64], n: usize, h: usize, w: usize) -> Vec<f64> {
+        let (k, s, d) = (conv.kernel, conv.stride, conv.dilation);
+        let (oh, pt) = conv.padding.output_and_pad_before(h, k, s, d);
+        let (ow, pl) = conv.padding.output_and_pad_before(w, k, s, d);
+        let mut y = vec![0.0; n * conv.c_out * oh * ow];
+        for i in 0..n {
+            for o in 0..conv.c_out {
+                for oy in 0..oh {
+                    for ox in 0..ow {
+                        let mut acc = b[o];
+                        for c in 0..conv.c_in {
+                            for ki in 0..k {
+                                for kj in 0..k {
+                                    let iy = (oy * s + ki * d) as isize - pt as isize;
+                                    let ix = (ox * s + kj * d) as isize - pl as isize;
+                                    if iy < 0 || ix < 0 || iy >= h as isize || ix >= w as isize {
+                                        continue;
+                                    }
+                                    let xi = ((i * conv.c_in + c) * h + iy as usize) * w + ix as usize;
+                                    acc += wt[((o * conv.c_in + c) * k + ki) * k + kj] * x[xi];
+                                }
+                            }
+                        }
+                        y[((i * conv.c_out + o) * oh + oy) * ow + ox] = acc;
+                    }
+                }
+            }
+        }
+        y
+    }
+
+    /// Forward vs naive, backward (dx, dW, db) vs finite differences of naive with loss = Σ y ⊙ r,
+    /// then a second backward must double every gradient.
+    fn check(conv: Conv2d, n: usize, h: usize, w: usize, y_channels: usize, y_offset: usize, seed: u64) {
+        let (oh, ow) = conv.output_size(h, w);
+        let p = oh * ow;
+        assert!(p > 0);
+        let wt = test_values(conv.weight_len(), seed);
+        let b = test_values(conv.c_out, seed + 1);
+        let x = test_values(n * conv.c_in * h * w, seed + 2);
+        let r = test_values(n * y_channels * p, seed + 3); // dy over the whole output tensor
+        // Stale garbage in an oversized scratch must not leak into results.
+        let mut scratch = vec![f32::NAN; 7];
+
+        let mut y = vec![f32::NAN; n * y_channels * p];
+        conv.forward(&wt, &b, &x, n, h, w, &mut y, y_channels, y_offset, &mut scratch);
+        let slice = |t: &[f32], i: usize| t[(i * y_channels + y_offset) * p..][..conv.c_out * p].to_vec();
+        let got: Vec<f32> = (0..n).flat_map(|i| slice(&y, i)).collect();
+        let want = naive(&conv, &f64s(&wt), &f64s(&b), &f64s(&x), n, h, w);
+        assert_close(&got, &want, TOL, "forward");
+        let untouched = y.len() - n * conv.c_out * p;
+        assert_eq!(y.iter().filter(|v| v.is_nan()).count(), untouched, "wrote outside its channel slice");
+
+        let r_slice = f64s(&(0..n).flat_map(|i| slice(&r, i)).collect::<Vec<_>>());
+        let loss = |wt: &[f64], b: &[f64], x: &[f64]| -> f64 {
+            naive(&conv, wt, b, x, n, h, w).iter().zip(&r_slice).map(|(a, b)| a * b).sum()
+        };
+        let (wt64, b64, x64) = (f64s(&wt), f64s(&b), f64s(&x));
+        let want_dx = numerical_grad(&x64, 1e-3, |v| loss(&wt64, &b64, v));
+        let want_dw = numerical_grad(&wt64, 1e-3, |v| loss(v, &b64, &x64));
+        let want_db = numerical_grad(&b64, 1e-3, |v| loss(&wt64, v, &x64));
+
+        let mut dw = vec![0.0; wt.len()];
+        let mut db = vec![0.0; b.len()];
+        let mut dx = vec![0.0; x.len()];
+        scratch.iter_mut().for_each(|v| *v = f32::NAN);
+        for pass in 1..=2 {
+            let dx_arg = Some(&mut dx[..]);
+            conv.backward(&wt, &x, n, h, w, &r, y_channels, y_offset, &mut dw, &mut db, dx_arg, &mut scratch);
+            let scale = |v: &[f64]| v.iter().map(|a| a * pass as f64).collect::<Vec<_>>();
+            assert_close(&dx, &scale(&want_dx), TOL, &format!("dx pass {pass}"));
+            assert_close(&dw, &scale(&want_dw), TOL, &format!("dweight pass {pass}"));
+            assert_close(&db, &scale(&want_db), TOL, &format!("dbias pass {pass}"));
+        }
+
+        // Without dx the parameter gradients are the same.
+        let (mut dw1, mut db1) = (vec![0.0; wt.len()], vec![0.0; b.len()]);
+        conv.backward(&wt, &x, n, h, w, &r, y_channels, y_offset, &mut dw1, &mut db1, None, &mut scratch);
+        assert_close(&dw1, &want_dw, TOL, "dweight without dx");
+        assert_close(&db1, &want_db, TOL, "dbias without dx");
+    }
+
+    fn conv(
+        c_in: usize,
+        c_out: usize,
+        kernel: usize,
+        stride: usize,
+        dilation: usize,
+        padding: Padding,
+    ) -> Conv2d {
+        Conv2d { c_in, c_out, kernel, stride, dilation, padding }
+    }
+
+    #[test]
+    fn padding_follows_tensorflow() {
+        use Padding::{Same, Valid};
+        assert_eq!(Same.output_and_pad_before(28, 3, 1, 1), (28, 1));
+        assert_eq!(Same.output_and_pad_before(28, 7, 1, 3), (28, 9));
+        assert_eq!(Same.output_and_pad_before(56, 5, 1, 4), (56, 8));
+        // k=3 s=2 on an even input: total 1, TF pads 0 before and 1 after.
+        assert_eq!(Same.output_and_pad_before(6, 3, 2, 1), (3, 0));
+        assert_eq!(Same.output_and_pad_before(7, 3, 2, 1), (4, 1));
+        assert_eq!(Same.output_and_pad_before(5, 1, 2, 1), (3, 0));
+        assert_eq!(Valid.output_and_pad_before(50, 3, 2, 1), (24, 0));
+        assert_eq!(Valid.output_and_pad_before(24, 3, 2, 1), (11, 0));
+        assert_eq!(Valid.output_and_pad_before(9, 3, 1, 2), (5, 0));
+        assert_eq!(Valid.output_and_pad_before(4, 5, 1, 1), (0, 0));
+        let c = conv(4, 32, 3, 2, 1, Valid);
+        assert_eq!(c.output_size(50, 48), (24, 23));
+        assert_eq!(c.weight_len(), 32 * 4 * 9);
+    }
+
+    #[test]
+    fn same_dilation_2_odd_size() {
+        check(conv(3, 4, 3, 1, 2, Padding::Same), 2, 7, 5, 4, 0, 10);
+    }
+
+    #[test]
+    fn valid_stride_2() {
+        check(conv(2, 3, 3, 2, 1, Padding::Valid), 2, 9, 8, 3, 0, 20);
+    }
+
+    #[test]
+    fn same_stride_2_even_size() {
+        assert_eq!(Padding::Same.output_and_pad_before(6, 3, 2, 1), (3, 0));
+        check(conv(2, 3, 3, 2, 1, Padding::Same), 2, 6, 6, 3, 0, 30);
+        check(conv(2, 2, 5, 2, 2, Padding::Same), 1, 8, 7, 2, 0, 35);
+    }
+
+    #[test]
+    fn single_channel_into_offset_slice_with_padding_wider_than_input() {
+        // Dilated span 9 > 8 input pixels: some taps never land inside the image.
+        check(conv(1, 3, 5, 1, 2, Padding::Same), 2, 8, 8, 7, 2, 40);
+        check(conv(2, 2, 3, 1, 1, Padding::Same), 2, 5, 5, 6, 4, 50);
+    }
+
+    #[test]
+    fn hwio_conversion() {
+        // k=1, c_in=2, c_out=3: hwio[c][o] = 3c + o → ours[o][c].
+        let hwio: Vec<f32> = (0..6).map(|v| v as f32).collect();
+        assert_eq!(weight_from_hwio(&hwio, 1, 2, 3), vec![0.0, 3.0, 1.0, 4.0, 2.0, 5.0]);
+        // k=2, c_in=1, c_out=2: hwio[kh][kw][0][o] = 2(2kh + kw) + o → ours[o][0][kh][kw].
+        let hwio: Vec<f32> = (0..8).map(|v| v as f32).collect();
+        assert_eq!(weight_from_hwio(&hwio, 2, 1, 2), vec![0.0, 2.0, 4.0, 6.0, 1.0, 3.0, 5.0, 7.0]);
+    }
+}

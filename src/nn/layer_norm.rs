@@ -1,0 +1,274 @@
+//! Layer normalisation over the channels of each pixel: Keras `LayerNormalization(axis=-1)` on NHWC,
+//! which in our NCHW layout normalises each pixel across its `channels` values (strided by `hw`).
+//!
+//! `y = (x − μ) / sqrt(σ² + eps) · γ + β`, μ and σ² (biased) over the channels of one pixel.
+//!
+//! Speed: the channels of a pixel are `hw` apart, so we never walk a pixel's channels one by one.
+//! Pixels are processed in tiles of [`TILE`]; per-pixel accumulators for the tile live on the stack
+//! and every inner loop runs over a contiguous run of one channel row, so it vectorises. A tile of
+//! 64 channels stays in L2 across the passes. No heap scratch is needed.
+
+/// Pixels per tile: the stack accumulators (4 × TILE f32 in backward) stay in L1.
+const TILE: usize = 256;
+/// Independent partial sums for the per-channel reductions (dγ, dβ), so they vectorise.
+const LANES: usize = 8;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayerNorm {
+    pub channels: usize,
+    /// PF-net uses 1e-3 (the Keras default).
+    pub eps: f32,
+}
+
+impl LayerNorm {
+    /// x, y: [n][channels][hw]; stats: [n][hw][2] = (mean, 1/sqrt(var+eps)) kept for backward.
+    /// gamma, beta: [channels].
+    #[allow(clippy::too_many_arguments)]
+    pub fn forward(
+        &self,
+        gamma: &[f32],
+        beta: &[f32],
+        x: &[f32],
+        n: usize,
+        hw: usize,
+        y: &mut [f32],
+        stats: &mut [f32],
+    ) {
+        let c = self.channels;
+        assert!(c > 0, "LayerNorm: no channels");
+        assert!(gamma.len() == c && beta.len() == c, "LayerNorm: gamma/beta length");
+        assert!(x.len() == n * c * hw && y.len() == x.len(), "LayerNorm: x/y length");
+        assert_eq!(stats.len(), n * hw * 2, "LayerNorm: stats length");
+        let inv_c = 1.0 / c as f32;
+        let mut mean_buf = [0.0f32; TILE];
+        let mut rstd_buf = [0.0f32; TILE];
+        for s in 0..n {
+            let xs = &x[s * c * hw..][..c * hw];
+            let ys = &mut y[s * c * hw..][..c * hw];
+            let ss = &mut stats[s * hw * 2..][..hw * 2];
+            for p0 in (0..hw).step_by(TILE) {
+                let t = TILE.min(hw - p0);
+                let mean = &mut mean_buf[..t];
+                let rstd = &mut rstd_buf[..t];
+                // Two passes (mean, then squared deviations): robust when |μ| ≫ σ.
+                mean.fill(0.0);
+                for ch in 0..c {
+                    for (m, &v) in mean.iter_mut().zip(&xs[ch * hw + p0..][..t]) {
+                        *m += v;
+                    }
+                }
+                for m in mean.iter_mut() {
+                    *m *= inv_c;
+                }
+                rstd.fill(0.0);
+                for ch in 0..c {
+                    for ((q, &v), &m) in rstd.iter_mut().zip(&xs[ch * hw + p0..][..t]).zip(mean.iter()) {
+                        let d = v - m;
+                        *q += d * d;
+                    }
+                }
+                for q in rstd.iter_mut() {
+                    *q = 1.0 / (*q * inv_c + self.eps).sqrt();
+                }
+                for ch in 0..c {
+                    let (g, b) = (gamma[ch], beta[ch]);
+                    let xr = &xs[ch * hw + p0..][..t];
+                    let yr = &mut ys[ch * hw + p0..][..t];
+                    for ((o, &v), (&m, &r)) in yr.iter_mut().zip(xr).zip(mean.iter().zip(rstd.iter())) {
+                        *o = (v - m) * (r * g) + b;
+                    }
+                }
+                for ((st, &m), &r) in
+                    ss[2 * p0..][..2 * t].chunks_exact_mut(2).zip(mean.iter()).zip(rstd.iter())
+                {
+                    st[0] = m;
+                    st[1] = r;
+                }
+            }
+        }
+    }
+
+    /// Accumulates into dgamma, dbeta ([channels]) and dx ([n][channels][hw]).
+    ///
+    /// With x̂ = (x − μ)·r and e = dy·γ: dx = r·(e − mean_c(e) − x̂·mean_c(e·x̂)),
+    /// dγ = Σ dy·x̂, dβ = Σ dy.
+    #[allow(clippy::too_many_arguments)]
+    pub fn backward(
+        &self,
+        gamma: &[f32],
+        x: &[f32],
+        stats: &[f32],
+        dy: &[f32],
+        n: usize,
+        hw: usize,
+        dgamma: &mut [f32],
+        dbeta: &mut [f32],
+        dx: &mut [f32],
+    ) {
+        let c = self.channels;
+        assert!(c > 0, "LayerNorm: no channels");
+        assert!(gamma.len() == c && dgamma.len() == c && dbeta.len() == c, "LayerNorm: gamma length");
+        assert!(x.len() == n * c * hw && dy.len() == x.len() && dx.len() == x.len(), "LayerNorm: x length");
+        assert_eq!(stats.len(), n * hw * 2, "LayerNorm: stats length");
+        let inv_c = 1.0 / c as f32;
+        let mut mean_buf = [0.0f32; TILE];
+        let mut rstd_buf = [0.0f32; TILE];
+        let mut s1_buf = [0.0f32; TILE];
+        let mut s2_buf = [0.0f32; TILE];
+        for s in 0..n {
+            let xs = &x[s * c * hw..][..c * hw];
+            let dys = &dy[s * c * hw..][..c * hw];
+            let dxs = &mut dx[s * c * hw..][..c * hw];
+            let ss = &stats[s * hw * 2..][..hw * 2];
+            for p0 in (0..hw).step_by(TILE) {
+                let t = TILE.min(hw - p0);
+                let mean = &mut mean_buf[..t];
+                let rstd = &mut rstd_buf[..t];
+                let s1 = &mut s1_buf[..t];
+                let s2 = &mut s2_buf[..t];
+                for ((st, m), r) in
+                    ss[2 * p0..][..2 * t].chunks_exact(2).zip(mean.iter_mut()).zip(rstd.iter_mut())
+                {
+                    *m = st[0];
+                    *r = st[1];
+                }
+                s1.fill(0.0);
+                s2.fill(0.0);
+                for ch in 0..c {
+                    let xr = &xs[ch * hw + p0..][..t];
+                    let dr = &dys[ch * hw + p0..][..t];
+                    let (dg, db) = accumulate_row(gamma[ch], xr, dr, mean, rstd, s1, s2);
+                    dgamma[ch] += dg;
+                    dbeta[ch] += db;
+                }
+                // Fold per-pixel constants: s1 → mean_c(e), s2 → r·mean_c(e·x̂).
+                for ((a, b), &r) in s1.iter_mut().zip(s2.iter_mut()).zip(rstd.iter()) {
+                    *a *= inv_c;
+                    *b *= r * inv_c;
+                }
+                for ch in 0..c {
+                    let g = gamma[ch];
+                    let xr = &xs[ch * hw + p0..][..t];
+                    let dr = &dys[ch * hw + p0..][..t];
+                    let out = &mut dxs[ch * hw + p0..][..t];
+                    let per_pixel = mean.iter().zip(rstd.iter()).zip(s1.iter().zip(s2.iter()));
+                    for (((o, &v), &d), ((&m, &r), (&a, &b))) in out.iter_mut().zip(xr).zip(dr).zip(per_pixel)
+                    {
+                        *o += r * (g * d - a - (v - m) * b);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// One channel row of a tile: adds e = dy·γ and e·x̂ into the per-pixel sums `s1`, `s2` and returns
+/// this row's (Σ dy·x̂, Σ dy) for dγ, dβ. Reductions run in LANES independent partial sums.
+#[inline(always)]
+fn accumulate_row(
+    g: f32,
+    x: &[f32],
+    dy: &[f32],
+    mean: &[f32],
+    rstd: &[f32],
+    s1: &mut [f32],
+    s2: &mut [f32],
+) -> (f32, f32) {
+    let mut dg = [0.0f32; LANES];
+    let mut db = [0.0f32; LANES];
+    let split = x.len() - x.len() % LANES;
+    let chunks = x[..split]
+        .chunks_exact(LANES)
+        .zip(dy[..split].chunks_exact(LANES))
+        .zip(mean[..split].chunks_exact(LANES).zip(rstd[..split].chunks_exact(LANES)))
+        .zip(s1[..split].chunks_exact_mut(LANES).zip(s2[..split].chunks_exact_mut(LANES)));
+    for (((xc, dc), (mc, rc)), (ac, bc)) in chunks {
+        for l in 0..LANES {
+            let xh = (xc[l] - mc[l]) * rc[l];
+            let e = dc[l] * g;
+            ac[l] += e;
+            bc[l] += e * xh;
+            dg[l] += dc[l] * xh;
+            db[l] += dc[l];
+        }
+    }
+    for i in split..x.len() {
+        let xh = (x[i] - mean[i]) * rstd[i];
+        let e = dy[i] * g;
+        s1[i] += e;
+        s2[i] += e * xh;
+        dg[0] += dy[i] * xh;
+        db[0] += dy[i];
+    }
+    (dg.iter().sum(), db.iter().sum())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::gradcheck::{assert_close, numerical_grad, test_values};
+
+    /// Naive f64 forward: pixel by pixel, channel by channel.
+    fn naive(ln: &LayerNorm, gamma: &[f64], beta: &[f64], x: &[f64], n: usize, hw: usize) -> Vec<f64> {
+        let c = ln.channels;
+        let mut y = vec![0.0; x.len()];
+        for s in 0..n {
+            for p in 0..hw {
+                let at = |ch: usize| (s * c + ch) * hw + p;
+                let mean = (0..c).map(|ch| x[at(ch)]).sum::<f64>() / c as f64;
+                let var = (0..c).map(|ch| (x[at(ch)] - mean).powi(2)).sum::<f64>() / c as f64;
+                for ch in 0..c {
+                    y[at(ch)] = (x[at(ch)] - mean) / (var + f64::from(ln.eps)).sqrt() * gamma[ch] + beta[ch];
+                }
+            }
+        }
+        y
+    }
+
+    fn to64(v: &[f32]) -> Vec<f64> {
+        v.iter().map(|&a| f64::from(a)).collect()
+    }
+
+    fn dot(a: &[f64], r: &[f32]) -> f64 {
+        a.iter().zip(r).map(|(&a, &b)| a * f64::from(b)).sum()
+    }
+
+    /// hw = 7 (one partial tile, scalar tail) and hw = TILE + 13 (two tiles, odd tail).
+    #[test]
+    fn layer_norm_matches_naive_and_finite_differences() {
+        let ln = LayerNorm { channels: 5, eps: 1e-3 };
+        let c = ln.channels;
+        let n = 2;
+        for hw in [7, TILE + 13] {
+            // An offset on x checks the two-pass statistics; non-trivial γ, β.
+            let x: Vec<f32> = test_values(n * c * hw, 1).iter().map(|v| v + 3.0).collect();
+            let gamma: Vec<f32> = test_values(c, 2).iter().map(|v| 1.0 + 0.5 * v).collect();
+            let beta = test_values(c, 3);
+            let r = test_values(n * c * hw, 4);
+            let (x64, g64, b64) = (to64(&x), to64(&gamma), to64(&beta));
+
+            let mut y = vec![0.0; x.len()];
+            let mut stats = vec![0.0; n * hw * 2];
+            ln.forward(&gamma, &beta, &x, n, hw, &mut y, &mut stats);
+            assert_close(&y, &naive(&ln, &g64, &b64, &x64, n, hw), 1e-5, "forward");
+
+            let mut dx = vec![0.0; x.len()];
+            let mut dgamma = vec![0.0; c];
+            let mut dbeta = vec![0.0; c];
+            ln.backward(&gamma, &x, &stats, &r, n, hw, &mut dgamma, &mut dbeta, &mut dx);
+            let h = 1e-5;
+            let want_dx = numerical_grad(&x64, h, |x| dot(&naive(&ln, &g64, &b64, x, n, hw), &r));
+            let want_dg = numerical_grad(&g64, h, |g| dot(&naive(&ln, g, &b64, &x64, n, hw), &r));
+            let want_db = numerical_grad(&b64, h, |b| dot(&naive(&ln, &g64, b, &x64, n, hw), &r));
+            assert_close(&dx, &want_dx, 1e-4, "dx");
+            assert_close(&dgamma, &want_dg, 1e-4, "dgamma");
+            assert_close(&dbeta, &want_db, 1e-4, "dbeta");
+
+            ln.backward(&gamma, &x, &stats, &r, n, hw, &mut dgamma, &mut dbeta, &mut dx);
+            let twice = |v: &[f64]| v.iter().map(|a| 2.0 * a).collect::<Vec<_>>();
+            assert_close(&dx, &twice(&want_dx), 1e-4, "dx accumulated");
+            assert_close(&dgamma, &twice(&want_dg), 1e-4, "dgamma accumulated");
+            assert_close(&dbeta, &twice(&want_db), 1e-4, "dbeta accumulated");
+        }
+    }
+}

@@ -1,0 +1,17 @@
+//! Our neural engine, in the manner of llm.c: fixed layers with `forward` and `backward` side by
+//! side over flat NCHW `f32` slices, backward passes that accumulate, parameters in one arena,
+//! Adam, safetensors checkpoints; PF-net on top. No ECS types in here.
+
+pub mod activation;
+pub mod adam;
+pub mod checkpoint;
+pub mod conv;
+pub mod dense;
+pub mod gemm;
+#[cfg(test)]
+pub mod gradcheck;
+pub mod layer_norm;
+pub mod locally_connected;
+pub mod params;
+pub mod pfnet;
+pub mod pool;

@@ -1,0 +1,105 @@
+//! Running PF-net over every particle of every robot at once: fixed chunks of particles on the
+//! rayon pool, one reusable workspace per thread, results independent of the thread count
+//! (each chunk's arithmetic is the same whichever thread runs it).
+
+use super::model::{PfNet, Workspace};
+use rayon::prelude::*;
+use std::sync::Mutex;
+
+/// Particles per parallel task: enough columns for the locally-connected products to run near
+/// the GEMM's peak, few enough that a task's activations stay small.
+pub const PARTICLE_CHUNK: usize = 128;
+/// Particles the map encoder takes at once inside a task (its 64 × 28 × 28 activations per
+/// particle are the largest buffers of the step).
+pub const MAP_ENCODER_CHUNK: usize = 8;
+
+/// One workspace per pool thread, reused across steps so the filter path allocates nothing
+/// once warm.
+#[derive(Debug, Default)]
+pub struct Workspaces {
+    slots: Vec<Mutex<Workspace>>,
+}
+
+impl Workspaces {
+    /// One slot per thread of the current rayon pool (plus one for callers outside it).
+    pub fn for_current_pool() -> Self {
+        Self { slots: (0..=rayon::current_num_threads()).map(|_| Mutex::default()).collect() }
+    }
+
+    /// Runs `f` with the calling thread's workspace.
+    pub(super) fn with<R>(&self, f: impl FnOnce(&mut Workspace) -> R) -> R {
+        let slot = rayon::current_thread_index().map_or(self.slots.len() - 1, |i| i % self.slots.len());
+        let mut ws = self.slots[slot].lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        f(&mut ws)
+    }
+}
+
+impl PfNet {
+    /// Observation features for `n` observations ([n][obs_len] → [n][obs_feature_len]), one per task.
+    pub fn encode_observations_par(&self, obs: &[f32], features: &mut [f32], pool: &Workspaces) {
+        let (len, flen) = (self.obs_len(), self.obs_feature_len());
+        features.par_chunks_mut(flen).zip(obs.par_chunks(len)).for_each(|(out, one)| {
+            pool.with(|ws| self.encode_observations(one, 1, out, ws));
+        });
+    }
+
+    /// Map features of every particle from its local map ([n][local_map_len] → [n][map_feature_len]):
+    /// the per-particle half of the exact path, and what the feature cache stores per map.
+    pub fn encode_local_maps_par(&self, maps: &[f32], features: &mut [f32], pool: &Workspaces) {
+        let (len, flen) = (self.local_map_len(), self.map_feature_len());
+        features
+            .par_chunks_mut(MAP_ENCODER_CHUNK * flen)
+            .zip(maps.par_chunks(MAP_ENCODER_CHUNK * len))
+            .for_each(|(out, chunk)| {
+                pool.with(|ws| self.encode_local_maps(chunk, chunk.len() / len, out, ws));
+            });
+    }
+
+    /// Log-likelihoods of every particle from its local map (the paper's exact path): particle
+    /// i belongs to robot `owner[i]`, whose observation features are row `owner[i]` of
+    /// `obs_features`.
+    pub fn log_likelihoods_exact(
+        &self,
+        obs_features: &[f32],
+        owner: &[u32],
+        maps: &[f32],
+        loglik: &mut [f32],
+        pool: &Workspaces,
+    ) {
+        let (len, flen) = (self.local_map_len(), self.map_feature_len());
+        loglik.par_chunks_mut(PARTICLE_CHUNK).enumerate().for_each(|(c, out)| {
+            let first = c * PARTICLE_CHUNK;
+            let maps = &maps[first * len..(first + out.len()) * len];
+            pool.with(|ws| {
+                let mut features = std::mem::take(&mut ws.chunk_map_features);
+                features.resize(out.len() * flen, 0.0);
+                for (sub, part) in
+                    maps.chunks(MAP_ENCODER_CHUNK * len).zip(features.chunks_mut(MAP_ENCODER_CHUNK * flen))
+                {
+                    self.encode_local_maps(sub, sub.len() / len, part, ws);
+                }
+                let owners = &owner[first..first + out.len()];
+                self.joint_log_likelihoods(&features, obs_features, owners, out, ws);
+                ws.chunk_map_features = features;
+            });
+        });
+    }
+
+    /// Log-likelihoods from map features already at hand (the cached path), same ownership rule.
+    pub fn log_likelihoods_from_features(
+        &self,
+        obs_features: &[f32],
+        owner: &[u32],
+        map_features: &[f32],
+        loglik: &mut [f32],
+        pool: &Workspaces,
+    ) {
+        let flen = self.map_feature_len();
+        loglik.par_chunks_mut(PARTICLE_CHUNK).enumerate().for_each(|(c, out)| {
+            let first = c * PARTICLE_CHUNK;
+            let features = &map_features[first * flen..(first + out.len()) * flen];
+            let owners = &owner[first..first + out.len()];
+            pool.with(|ws| self.joint_log_likelihoods(features, obs_features, owners, out, ws));
+        });
+    }
+}

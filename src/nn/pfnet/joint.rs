@@ -1,0 +1,147 @@
+//! PF-net's joint stage: map features ⊕ observation features → one log-likelihood per particle.
+//!
+//! 14×14×(8 + 16) → locally-connected 8@3×3 'valid' ⊕ 8@5×5 (zero pad 1), each with ReLU
+//! → 12×12×16 → max-pool 3×3/2 'valid' → 5×5×16 = 400 → dense → 1.
+
+use super::config::PfNetConfig;
+use super::stage::{sized, zeroed};
+use crate::nn::activation::{relu_backward, relu_forward};
+use crate::nn::conv::Padding;
+use crate::nn::dense::Dense;
+use crate::nn::locally_connected::LocallyConnected2d;
+use crate::nn::params::{ParamId, Params};
+use crate::nn::pool::MaxPool2d;
+use rand::Rng;
+
+const POOL: MaxPool2d = MaxPool2d { kernel: 3, stride: 2, padding: Padding::Valid };
+
+#[derive(Clone, Debug)]
+pub struct Joint {
+    /// Side of the input features (paper: 14) and of the locally-connected outputs (12).
+    side: usize,
+    out_side: usize,
+    pooled_side: usize,
+    /// Input channels: the map features first, then the observation features.
+    pub map_channels: usize,
+    pub obs_channels: usize,
+    lc3: (LocallyConnected2d, ParamId, ParamId),
+    lc5: (LocallyConnected2d, ParamId, ParamId),
+    head: (Dense, ParamId, ParamId),
+}
+
+/// Everything the forward pass keeps for the backward, for a chunk of particles.
+#[derive(Clone, Debug, Default)]
+pub struct JointActivations {
+    /// The input, [n][map + obs channels][side][side]; callers fill it.
+    pub input: Vec<f32>,
+    local: Vec<f32>,
+    pooled: Vec<f32>,
+    argmax: Vec<u8>,
+    /// One log-likelihood per particle.
+    pub loglik: Vec<f32>,
+    /// d loss / d input after the backward pass.
+    pub dinput: Vec<f32>,
+    grad_local: Vec<f32>,
+    grad_pooled: Vec<f32>,
+    grad_relu: Vec<f32>,
+    scratch: Vec<f32>,
+}
+
+impl Joint {
+    pub fn new(
+        params: &mut Params,
+        config: &PfNetConfig,
+        map_channels: usize,
+        obs_channels: usize,
+        rng: &mut impl Rng,
+    ) -> Self {
+        let side = config.local_map.cells / 2;
+        let c_in = map_channels + obs_channels;
+        let filters = config.joint_filters;
+        let mut lc = |name: &str, kernel: usize, pad: usize| {
+            let layer = LocallyConnected2d { c_in, filters, kernel, pad, h: side, w: side };
+            let w = params.add(&format!("{name}/kernel"), &[layer.positions(), filters, layer.patch_len()]);
+            let b = params.add(&format!("{name}/bias"), &[layer.positions(), filters]);
+            params.fill_uniform(w, (6.0 / (layer.patch_len() + filters) as f32).sqrt(), rng);
+            (layer, w, b)
+        };
+        let (lc3, lc5) = (lc("j_lc3", 3, 0), lc("j_lc5", 5, 1));
+        let out_side = lc3.0.output_size().0;
+        let pooled_side = POOL.output_size(out_side, out_side).0;
+        let dense = Dense { inputs: 2 * filters * pooled_side * pooled_side, outputs: 1 };
+        let w = params.add("j_out/kernel", &[dense.inputs, 1]);
+        let b = params.add("j_out/bias", &[1]);
+        params.fill_uniform(w, (6.0 / (dense.inputs + 1) as f32).sqrt(), rng);
+        Self { side, out_side, pooled_side, map_channels, obs_channels, lc3, lc5, head: (dense, w, b) }
+    }
+
+    /// Values of one particle's input.
+    pub fn input_len(&self) -> usize {
+        (self.map_channels + self.obs_channels) * self.side * self.side
+    }
+
+    /// acts.input [n][…] → acts.loglik [n].
+    pub fn forward(&self, p: &Params, n: usize, acts: &mut JointActivations) {
+        let (o, q) = (self.out_side, self.pooled_side);
+        let channels = 2 * self.lc3.0.filters;
+        sized(&mut acts.local, n * channels * o * o);
+        for (offset, (layer, w, b)) in [(0, &self.lc3), (self.lc3.0.filters, &self.lc5)] {
+            layer.forward(
+                p.get(*w),
+                p.get(*b),
+                &acts.input,
+                n,
+                &mut acts.local,
+                channels,
+                offset,
+                &mut acts.scratch,
+            );
+        }
+        relu_forward(&mut acts.local);
+        sized(&mut acts.pooled, n * channels * q * q);
+        acts.argmax.resize(n * channels * q * q, 0);
+        POOL.forward(&acts.local, n * channels, o, o, &mut acts.pooled, &mut acts.argmax);
+        sized(&mut acts.loglik, n);
+        let (dense, w, b) = &self.head;
+        dense.forward(p.get(*w), p.get(*b), &acts.pooled, n, &mut acts.loglik);
+    }
+
+    /// From d loss / d loglik to the weight gradients (accumulated) and acts.dinput (overwritten).
+    pub fn backward(
+        &self,
+        p: &Params,
+        n: usize,
+        acts: &mut JointActivations,
+        dloglik: &[f32],
+        grads: &mut [f32],
+    ) {
+        let (o, q) = (self.out_side, self.pooled_side);
+        let channels = 2 * self.lc3.0.filters;
+        let a = acts;
+        zeroed(&mut a.grad_pooled, n * channels * q * q);
+        let (dense, w, b) = &self.head;
+        let (dw, db) = p.pair_mut(grads, *w, *b);
+        dense.backward(p.get(*w), &a.pooled, n, dloglik, dw, db, Some(&mut a.grad_pooled));
+        zeroed(&mut a.grad_relu, n * channels * o * o);
+        POOL.backward(&a.grad_pooled, &a.argmax, n * channels, o, o, &mut a.grad_relu);
+        zeroed(&mut a.grad_local, n * channels * o * o);
+        relu_backward(&a.local, &a.grad_relu, &mut a.grad_local);
+        zeroed(&mut a.dinput, n * self.input_len());
+        for (offset, (layer, w, b)) in [(0, &self.lc3), (self.lc3.0.filters, &self.lc5)] {
+            let (dw, db) = p.pair_mut(grads, *w, *b);
+            let weight = p.get(*w);
+            layer.backward(
+                weight,
+                &a.input,
+                n,
+                &a.grad_local,
+                channels,
+                offset,
+                dw,
+                db,
+                Some(&mut a.dinput),
+                &mut a.scratch,
+            );
+        }
+    }
+}

@@ -1,0 +1,122 @@
+//! PF-net's map encoder: a particle's local map → its map features.
+//!
+//! 28×28×1 → parallel convs (paper: 24@3×3, 16@5×5, 8@7×7, 8@7×7 d2, 8@7×7 d3) → 28×28×64
+//! → LayerNorm → ReLU → max-pool 3×3/2 → 14×14×64 → parallel convs (4@3×3, 4@5×5) → 14×14×8
+//! → LayerNorm → ReLU → 14×14×8.
+
+use super::config::PfNetConfig;
+use super::stage::{Branches, NormRelu, sized, zeroed};
+use crate::nn::conv::Padding;
+use crate::nn::params::Params;
+use crate::nn::pool::MaxPool2d;
+use rand::Rng;
+
+const POOL: MaxPool2d = MaxPool2d { kernel: 3, stride: 2, padding: Padding::Same };
+
+#[derive(Clone, Debug)]
+pub struct MapEncoder {
+    side: usize,
+    convs1: Branches,
+    norm1: NormRelu,
+    convs2: Branches,
+    norm2: NormRelu,
+}
+
+/// Everything the forward pass keeps for the backward, for a chunk of particles.
+#[derive(Clone, Debug, Default)]
+pub struct MapActivations {
+    conv1: Vec<f32>,
+    norm1: Vec<f32>,
+    stats1: Vec<f32>,
+    pooled: Vec<f32>,
+    argmax: Vec<u8>,
+    conv2: Vec<f32>,
+    stats2: Vec<f32>,
+    /// The encoder's output, [n][channels][side/2][side/2].
+    pub features: Vec<f32>,
+    grad_a: Vec<f32>,
+    grad_b: Vec<f32>,
+    grad_c: Vec<f32>,
+    scratch: Vec<f32>,
+}
+
+impl MapEncoder {
+    pub fn new(params: &mut Params, config: &PfNetConfig, rng: &mut impl Rng) -> Self {
+        let convs1 = Branches::new(params, "m", config.map_channels, &config.map_stage1, rng);
+        let norm1 = NormRelu::new(params, "m_ln1", convs1.channels, config.layer_norm_eps);
+        let convs2 = Branches::new(params, "m2", convs1.channels, &config.map_stage2, rng);
+        let norm2 = NormRelu::new(params, "m_ln2", convs2.channels, config.layer_norm_eps);
+        Self { side: config.local_map.cells, convs1, norm1, convs2, norm2 }
+    }
+
+    /// Channels × pixels of one particle's features.
+    pub fn feature_len(&self) -> usize {
+        self.convs2.channels * (self.side / 2) * (self.side / 2)
+    }
+
+    /// maps [n][map_channels][side][side] → acts.features [n][feature_len].
+    pub fn forward(&self, p: &Params, maps: &[f32], n: usize, acts: &mut MapActivations) {
+        let (s, h) = (self.side, self.side / 2);
+        let (c1, c2) = (self.convs1.channels, self.convs2.channels);
+        sized(&mut acts.conv1, n * c1 * s * s);
+        self.convs1.forward(p, maps, n, (s, s), &mut acts.conv1, &mut acts.scratch);
+        sized(&mut acts.norm1, n * c1 * s * s);
+        sized(&mut acts.stats1, n * s * s * 2);
+        self.norm1.forward(p, &acts.conv1, n, s * s, &mut acts.norm1, &mut acts.stats1);
+        sized(&mut acts.pooled, n * c1 * h * h);
+        acts.argmax.resize(n * c1 * h * h, 0);
+        POOL.forward(&acts.norm1, n * c1, s, s, &mut acts.pooled, &mut acts.argmax);
+        sized(&mut acts.conv2, n * c2 * h * h);
+        self.convs2.forward(p, &acts.pooled, n, (h, h), &mut acts.conv2, &mut acts.scratch);
+        sized(&mut acts.features, n * c2 * h * h);
+        sized(&mut acts.stats2, n * h * h * 2);
+        self.norm2.forward(p, &acts.conv2, n, h * h, &mut acts.features, &mut acts.stats2);
+    }
+
+    /// From d loss / d features to the weight gradients (accumulated into `grads`); the local
+    /// maps are inputs, so no gradient flows further.
+    pub fn backward(
+        &self,
+        p: &Params,
+        maps: &[f32],
+        n: usize,
+        acts: &mut MapActivations,
+        dfeatures: &[f32],
+        grads: &mut [f32],
+    ) {
+        let (s, h) = (self.side, self.side / 2);
+        let (c1, c2) = (self.convs1.channels, self.convs2.channels);
+        let a = acts;
+        zeroed(&mut a.grad_a, n * c2 * h * h); // d conv2
+        self.norm2.backward(
+            p,
+            &a.conv2,
+            &a.features,
+            &a.stats2,
+            dfeatures,
+            n,
+            h * h,
+            grads,
+            &mut a.grad_a,
+            &mut a.scratch,
+        );
+        zeroed(&mut a.grad_b, n * c1 * h * h); // d pooled
+        self.convs2.backward(p, &a.pooled, n, (h, h), &a.grad_a, grads, Some(&mut a.grad_b), &mut a.scratch);
+        zeroed(&mut a.grad_c, n * c1 * s * s); // d norm1 (after ReLU)
+        POOL.backward(&a.grad_b, &a.argmax, n * c1, s, s, &mut a.grad_c);
+        zeroed(&mut a.grad_a, n * c1 * s * s); // d conv1
+        self.norm1.backward(
+            p,
+            &a.conv1,
+            &a.norm1,
+            &a.stats1,
+            &a.grad_c,
+            n,
+            s * s,
+            grads,
+            &mut a.grad_a,
+            &mut a.scratch,
+        );
+        self.convs1.backward(p, maps, n, (s, s), &a.grad_a, grads, None, &mut a.scratch);
+    }
+}

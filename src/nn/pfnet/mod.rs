@@ -1,0 +1,23 @@
+//! PF-net's observation model: configuration, the three parts (map encoder, observation
+//! encoder, joint stage), the spatial transformer that cuts each particle's local map, the
+//! training loss, and the Keras reference check.
+
+mod batch;
+mod config;
+mod joint;
+mod loss;
+mod map_encoder;
+mod model;
+mod obs_encoder;
+mod reference;
+mod spatial_transformer;
+mod stage;
+mod train_step;
+
+pub use batch::{MAP_ENCODER_CHUNK, PARTICLE_CHUNK, Workspaces};
+pub use config::{ConvBranch, PfNetConfig};
+pub use loss::PoseLoss;
+pub use model::{ParamCounts, PfNet, Workspace};
+pub use reference::{ReferenceError, VerifyReport, from_keras_layout, load_reference_model, verify};
+pub use spatial_transformer::{LocalMapSpec, MapView, crop_local_maps};
+pub use train_step::{GradBuffers, STEPS_PER_TASK, StepBatch};

@@ -1,0 +1,175 @@
+//! PF-net's observation model (Karkus et al. 2018; APFN's configuration): for each particle,
+//! log p(observation | particle's local map). The map encoder runs per particle, the observation
+//! encoder once per step, the joint stage per particle on their concatenated features.
+
+use super::config::PfNetConfig;
+use super::joint::{Joint, JointActivations};
+use super::map_encoder::{MapActivations, MapEncoder};
+use super::obs_encoder::{ObsActivations, ObsEncoder};
+use crate::nn::params::Params;
+use rand::SeedableRng;
+use rand_pcg::Pcg64Mcg;
+
+/// The network: its configuration, its parameters in one arena, and the three parts.
+#[derive(Clone, Debug)]
+pub struct PfNet {
+    pub config: PfNetConfig,
+    pub params: Params,
+    map: MapEncoder,
+    obs: ObsEncoder,
+    joint: Joint,
+}
+
+/// Buffers for one thread's share of the work; reused across calls (they only grow).
+#[derive(Clone, Debug, Default)]
+pub struct Workspace {
+    pub map: MapActivations,
+    pub obs: ObsActivations,
+    pub joint: JointActivations,
+    /// A parallel task's map features before the joint stage (see `batch.rs`).
+    pub chunk_map_features: Vec<f32>,
+    grad_map_features: Vec<f32>,
+    grad_obs_features: Vec<f32>,
+}
+
+/// Parameter counts per part.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct ParamCounts {
+    pub map_encoder: usize,
+    pub obs_encoder: usize,
+    pub joint: usize,
+    pub total: usize,
+}
+
+impl PfNet {
+    /// A freshly initialised network (Keras's initialisers), deterministic for `seed`.
+    ///
+    /// # Errors
+    /// The configuration's own check, `"field: expected …"`.
+    pub fn new(config: PfNetConfig, seed: u64) -> Result<Self, String> {
+        config.check()?;
+        let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        let mut params = Params::new();
+        let map = MapEncoder::new(&mut params, &config, &mut rng);
+        let obs = ObsEncoder::new(&mut params, &config, &mut rng);
+        let map_channels = map.feature_len() / quarter(&config);
+        let obs_channels = obs.feature_len() / quarter(&config);
+        let joint = Joint::new(&mut params, &config, map_channels, obs_channels, &mut rng);
+        Ok(Self { config, params, map, obs, joint })
+    }
+
+    pub fn param_counts(&self) -> ParamCounts {
+        let count = |prefixes: &[&str]| {
+            self.params
+                .specs()
+                .filter(|(_, s)| prefixes.iter().any(|p| s.name.starts_with(p)))
+                .map(|(_, s)| s.shape.iter().product::<usize>())
+                .sum()
+        };
+        let (map_encoder, obs_encoder, joint) =
+            (count(&["m_", "m2_"]), count(&["o_", "o2_"]), count(&["j_"]));
+        ParamCounts { map_encoder, obs_encoder, joint, total: self.params.len() }
+    }
+
+    /// Values of one local map, one observation, one particle's map features, one observation's features.
+    pub fn local_map_len(&self) -> usize {
+        self.config.map_channels * self.config.local_map.cells.pow(2)
+    }
+    pub fn obs_len(&self) -> usize {
+        self.config.obs_channels * self.config.obs_cells.pow(2)
+    }
+    pub fn map_feature_len(&self) -> usize {
+        self.map.feature_len()
+    }
+    pub fn obs_feature_len(&self) -> usize {
+        self.obs.feature_len()
+    }
+
+    /// obs [n][obs_len] → features [n][obs_feature_len].
+    pub fn encode_observations(&self, obs: &[f32], n: usize, features: &mut [f32], ws: &mut Workspace) {
+        self.obs.forward(&self.params, obs, n, &mut ws.obs);
+        features.copy_from_slice(&ws.obs.features[..n * self.obs_feature_len()]);
+    }
+
+    /// local maps [n][local_map_len] → features [n][map_feature_len].
+    pub fn encode_local_maps(&self, maps: &[f32], n: usize, features: &mut [f32], ws: &mut Workspace) {
+        self.map.forward(&self.params, maps, n, &mut ws.map);
+        features.copy_from_slice(&ws.map.features[..n * self.map_feature_len()]);
+    }
+
+    /// The joint stage for `owner.len()` particles: map features [n][map_feature_len], and
+    /// particle i's observation features at row `owner[i]` of `obs_features` → loglik [n].
+    pub fn joint_log_likelihoods(
+        &self,
+        map_features: &[f32],
+        obs_features: &[f32],
+        owner: &[u32],
+        loglik: &mut [f32],
+        ws: &mut Workspace,
+    ) {
+        let n = owner.len();
+        self.fill_joint_input(map_features, obs_features, n, |i| owner[i] as usize, &mut ws.joint);
+        self.joint.forward(&self.params, n, &mut ws.joint);
+        loglik.copy_from_slice(&ws.joint.loglik[..n]);
+    }
+
+    /// One filter step's share of a training batch: the observation, its `k` particles' local
+    /// maps, forward to the log-likelihoods, `loss` turns them into (loss, d loss / d loglik),
+    /// then backward, accumulating every weight gradient into `grads` (laid out like `params`).
+    /// Returns the loss.
+    pub fn step_gradient(
+        &self,
+        obs: &[f32],
+        maps: &[f32],
+        k: usize,
+        loss: impl FnOnce(&[f32]) -> (f64, Vec<f32>),
+        grads: &mut [f32],
+        ws: &mut Workspace,
+    ) -> f64 {
+        let p = &self.params;
+        self.obs.forward(p, obs, 1, &mut ws.obs);
+        self.map.forward(p, maps, k, &mut ws.map);
+        self.fill_joint_input(&ws.map.features, &ws.obs.features, k, |_| 0, &mut ws.joint);
+        self.joint.forward(p, k, &mut ws.joint);
+        let (value, dloglik) = loss(&ws.joint.loglik[..k]);
+
+        self.joint.backward(p, k, &mut ws.joint, &dloglik, grads);
+        let (per_particle, map_len) = (self.joint.input_len(), self.map_feature_len());
+        let (dmap, dobs) = (&mut ws.grad_map_features, &mut ws.grad_obs_features);
+        dmap.resize(k * map_len, 0.0);
+        dobs.clear();
+        dobs.resize(self.obs_feature_len(), 0.0);
+        for (i, dinput) in ws.joint.dinput.chunks_exact(per_particle).take(k).enumerate() {
+            dmap[i * map_len..(i + 1) * map_len].copy_from_slice(&dinput[..map_len]);
+            // Every particle saw the same observation features: their gradients add up.
+            for (d, g) in dobs.iter_mut().zip(&dinput[map_len..]) {
+                *d += g;
+            }
+        }
+        self.map.backward(p, maps, k, &mut ws.map, &ws.grad_map_features, grads);
+        self.obs.backward(p, obs, 1, &mut ws.obs, &ws.grad_obs_features, grads);
+        value
+    }
+
+    /// Map features first, then the observation's features, per particle (the reference's concat order).
+    fn fill_joint_input(
+        &self,
+        map_features: &[f32],
+        obs_features: &[f32],
+        n: usize,
+        owner: impl Fn(usize) -> usize,
+        acts: &mut JointActivations,
+    ) {
+        let (m, o) = (self.map_feature_len(), self.obs_feature_len());
+        acts.input.resize(n * (m + o), 0.0);
+        for (i, row) in acts.input.chunks_exact_mut(m + o).take(n).enumerate() {
+            row[..m].copy_from_slice(&map_features[i * m..(i + 1) * m]);
+            row[m..].copy_from_slice(&obs_features[owner(i) * o..(owner(i) + 1) * o]);
+        }
+    }
+}
+
+/// Pixels of a feature map where the two encoders meet (paper: 14 × 14).
+fn quarter(config: &PfNetConfig) -> usize {
+    (config.local_map.cells / 2).pow(2)
+}
