@@ -9,8 +9,9 @@ use crate::belief::{BeliefParams, belief_crop};
 use crate::compose::registry::{NoParams, Registry, SystemSpec};
 use crate::episode::{KidnapParams, episode_reset, kidnap, step_metrics};
 use crate::particles::{
-    BeamModelParams, InitParams, LikelihoodFieldParams, RecoveryParams, ResampleParams, TransitionParams,
-    augmented_recovery, estimate, init_particles, mcl_beam_model, mcl_likelihood_field, resample, transition,
+    BeamModelParams, InitParams, LikelihoodFieldParams, PfNetLikelihoodParams, RecoveryParams,
+    ResampleParams, TransitionParams, augmented_recovery, estimate, init_particles, mcl_beam_model,
+    mcl_likelihood_field, pfnet_likelihood, resample, transition,
 };
 use crate::plugin::ApfnSet::{self, *};
 use crate::sense::{
@@ -117,6 +118,16 @@ pub fn standard_registry() -> Registry {
             &["LikelihoodStats"],
         ),
         mcl_beam_model,
+    )
+    .register::<PfNetLikelihoodParams, _, _>(
+        spec(
+            "pfnet_likelihood",
+            Particles,
+            "Reads LocalGrid, the map's NetworkMap. Writes ParticleSet weights, LikelihoodStats.",
+            &["ParticleSet", "LocalGrid"],
+            &["LikelihoodStats"],
+        ),
+        pfnet_likelihood,
     )
     .register::<RecoveryParams, _, _>(
         spec(

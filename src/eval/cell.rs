@@ -5,7 +5,7 @@ use crate::compose::{ComposeError, Pipeline};
 use crate::episode::{CompletedEpisodes, EpisodeRecord, summarize};
 use crate::eval::config::LoadedEval;
 use crate::eval::episodes::EpisodeRow;
-use crate::particles::{InitParams, Task};
+use crate::particles::{InitParams, ObservationModel, Task};
 use crate::plugin::{ApfnSet, headless_app};
 use crate::world::OccupancyMap;
 use bevy::prelude::Entity;
@@ -61,16 +61,21 @@ pub fn cell_steps(eval: &LoadedEval, cell: &CellSpec) -> u64 {
 
 /// The localizer and policy a schedule runs, for the table: the Particles-stage step that
 /// weighs particles against a sensor (`mcl` for the likelihood field, `mcl_beam` for the beam
-/// model), and the Agent-stage policy, without its `_policy` suffix.
+/// model, `pfnet` for PF-net), and the Agent-stage policy, without its `_policy` suffix.
 pub fn labels(pipeline: &Pipeline) -> (String, String) {
     let policy = pipeline
         .steps
         .iter()
         .find(|s| s.stage == ApfnSet::Agent)
         .map_or("none".into(), |s| s.name.trim_end_matches("_policy").to_owned());
-    let is_likelihood = |n: &&&str| n.ends_with("likelihood_field") || n.ends_with("beam_model");
+    let is_likelihood = |n: &&&str| {
+        [ObservationModel::LikelihoodField, ObservationModel::BeamModel, ObservationModel::PfNet]
+            .iter()
+            .any(|m| m.system_name() == **n)
+    };
     let localizer = match pipeline.names().iter().find(is_likelihood) {
         Some(&"mcl_beam_model") => "mcl_beam".to_owned(),
+        Some(&"pfnet_likelihood") => "pfnet".to_owned(),
         Some(name) if name.starts_with("mcl") => "mcl".to_owned(),
         Some(name) => name.to_string(),
         None => "odometry_only".to_owned(),

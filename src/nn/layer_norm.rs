@@ -39,6 +39,44 @@ impl LayerNorm {
         assert!(gamma.len() == c && beta.len() == c, "LayerNorm: gamma/beta length");
         assert!(x.len() == n * c * hw && y.len() == x.len(), "LayerNorm: x/y length");
         assert_eq!(stats.len(), n * hw * 2, "LayerNorm: stats length");
+        #[cfg(target_arch = "x86_64")]
+        if is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F.
+            return unsafe { self.forward_avx512(gamma, beta, x, n, hw, y, stats) };
+        }
+        self.forward_impl(gamma, beta, x, n, hw, y, stats);
+    }
+
+    /// The same loops compiled for AVX-512 (the crate's baseline is SSE2).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    #[allow(clippy::too_many_arguments)]
+    fn forward_avx512(
+        &self,
+        gamma: &[f32],
+        beta: &[f32],
+        x: &[f32],
+        n: usize,
+        hw: usize,
+        y: &mut [f32],
+        stats: &mut [f32],
+    ) {
+        self.forward_impl(gamma, beta, x, n, hw, y, stats);
+    }
+
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn forward_impl(
+        &self,
+        gamma: &[f32],
+        beta: &[f32],
+        x: &[f32],
+        n: usize,
+        hw: usize,
+        y: &mut [f32],
+        stats: &mut [f32],
+    ) {
+        let c = self.channels;
         let inv_c = 1.0 / c as f32;
         let mut mean_buf = [0.0f32; TILE];
         let mut rstd_buf = [0.0f32; TILE];

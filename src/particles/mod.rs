@@ -1,5 +1,5 @@
 //! ② Particles: the particle set and the filter steps, in the order a step runs them:
-//! init (fills empty sets) → transition → likelihood_field or beam_model → (augmented recovery) →
+//! init (fills empty sets) → transition → likelihood_field, beam_model or pfnet → (augmented recovery) →
 //! resample (fixed or KLD-adapted count) →
 //! estimate. Each step is a plain kernel over a `ParticleSet` plus a small system; weights are
 //! log-weights, Σ exp = 1.
@@ -9,6 +9,7 @@ mod estimate;
 mod init;
 mod kld;
 mod likelihood_field;
+mod pfnet;
 mod recovery;
 mod resample;
 mod set;
@@ -25,6 +26,7 @@ pub use likelihood_field::{
     LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,
     mcl_likelihood_field, selected_beams, weigh_likelihood_field,
 };
+pub use pfnet::{MapFeatures, PfNetLikelihoodParams, PfNetState, map_view, pfnet_likelihood, shared_model};
 pub use recovery::{
     RecoveryParams, RecoveryState, augmented_recovery, inject_uniform, recover, update_averages,
 };

@@ -191,6 +191,10 @@ pub fn augmented_recovery(
                 add_log_likelihoods(s, scan, field, &map.origin, &field_params)
             }
             ObservationModel::BeamModel => add_log_beam_likelihoods(s, scan, rays, &beam_params),
+            ObservationModel::PfNet => Err(ParticleError::InvalidParam {
+                field: "augmented_recovery",
+                expected: "a classical observation model before it (PF-net cannot weigh newcomers here yet)",
+            }),
         };
         match recover(&mut next, stats, &params, &mut set, (map, traversable), &mut rng.0, weigh) {
             Ok(count) => health.injected += count as u32,
@@ -285,6 +289,7 @@ mod tests {
                 ObservationModel::BeamModel => {
                     add_log_beam_likelihoods(&mut probe, &scan, &rays, &Default::default())
                 }
+                ObservationModel::PfNet => unreachable!("only the classical models are looped over"),
             }
             .expect("valid layers");
             let stats = LikelihoodStats { mean_log_likelihood: probe.log_w[0], updates: 2, model };

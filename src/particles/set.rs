@@ -57,6 +57,8 @@ pub enum ObservationModel {
     LikelihoodField,
     /// `mcl_beam_model`.
     BeamModel,
+    /// `pfnet_likelihood`: the learned model, which needs the robot's observation grid.
+    PfNet,
 }
 
 impl ObservationModel {
@@ -65,6 +67,7 @@ impl ObservationModel {
         match self {
             ObservationModel::LikelihoodField => "mcl_likelihood_field",
             ObservationModel::BeamModel => "mcl_beam_model",
+            ObservationModel::PfNet => "pfnet_likelihood",
         }
     }
 }

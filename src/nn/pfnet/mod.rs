@@ -4,20 +4,24 @@
 
 mod batch;
 mod config;
+mod feature_cache;
 mod joint;
 mod loss;
 mod map_encoder;
 mod model;
 mod obs_encoder;
 mod reference;
+mod saved;
 mod spatial_transformer;
 mod stage;
 mod train_step;
 
 pub use batch::{MAP_ENCODER_CHUNK, PARTICLE_CHUNK, Workspaces};
 pub use config::{ConvBranch, PfNetConfig};
+pub use feature_cache::{FeatureBank, FeatureCacheSpec};
 pub use loss::PoseLoss;
 pub use model::{ParamCounts, PfNet, Workspace};
 pub use reference::{ReferenceError, VerifyReport, from_keras_layout, load_reference_model, verify};
+pub use saved::PfNetFileError;
 pub use spatial_transformer::{LocalMapSpec, MapView, crop_local_maps};
 pub use train_step::{GradBuffers, STEPS_PER_TASK, StepBatch};

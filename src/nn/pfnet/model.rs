@@ -151,6 +151,11 @@ impl PfNet {
         value
     }
 
+    /// The map encoder itself, for the feature cache's whole-map windows.
+    pub(super) fn map_encoder(&self) -> &MapEncoder {
+        &self.map
+    }
+
     /// Map features first, then the observation's features, per particle (the reference's concat order).
     fn fill_joint_input(
         &self,

@@ -1,0 +1,585 @@
+//! PF-net's map-feature cache (beyond the paper): the map encoder is translation-equivariant
+//! (convolutions, per-pixel LayerNorm, ReLU; only the stride-2 pool snaps to a 2-pixel grid), so
+//! instead of encoding every particle's 28 × 28 local map we encode the whole map once per
+//! orientation and cut each particle's 14 × 14 features out of that bank.
+//!
+//! Orientation o has heading φ_o = 2π·o/N. Its *window* is an image of the map (plus a margin)
+//! rendered by the spatial transformer as a particle facing φ_o would see it: rows run against
+//! φ_o ("up" = φ_o), columns along its right. Window pixel (R, C)'s centre sits at window coordinates
+//! (ρ, κ) = (R + ½, C + ½) with ρ(q) = (T − q)·up / δ, κ(q) = (q − T)·right / δ for the window's
+//! top-left corner T and pixel side δ (the local map's 0.1 m). The encoder turns the window into
+//! features at 2δ whose cell (I, J) summarises pixels 2I…2I+2 × 2J…2J+2 (3 × 3 pool, stride 2, TF
+//! 'same': nothing before, one after), i.e. is centred at (ρ, κ) = (2I + 1.5, 2J + 1.5).
+//!
+//! A particle's exact feature (i, j) summarises its local pixels 2i…2i+2 × 2j…2j+2, centred at
+//! forward = (n − 2i − 1.5)·δ, left = (n/2 − 2j − 1.5)·δ in its own frame (n = 28). The cached
+//! feature is the bank of the orientation nearest the particle's heading, sampled bilinearly at
+//! that point's (I, J): the crop is placed like the exact one and turned by the residual angle
+//! (|θ − φ_o| ≤ π/N). When θ = φ_o and the point lands on the bank grid, a feature whose receptive
+//! field stays inside the local map equals the exact one (test `aligned_pose_matches_exact_path`).
+//! What remains approximate, measured on random poses in a 4 × 3 m room with random weights
+//! (`agreement_report`, compact network, N = 32): the exact path's crop border dominates — its
+//! convolutions see zero padding where the bank sees the map beyond, and the receptive field (29
+//! pixels) reaches the border from every feature — giving a relative feature error of 0.50 and a
+//! log-likelihood rank correlation of 0.68 against the exact path (0.42 / 0.81 paper network).
+//! Against the same encoder without that border (a local map with 1.6 m of context, centre kept)
+//! the cache is at 0.22 / 0.85 (paper 0.18 / 0.91): what is left is the heading residual (features
+//! computed at φ_o, not θ) and the sub-cell offset (bilinear at 0.2 m instead of re-pooling; the
+//! `pool_phases` option halves that spacing for 4× the memory).
+//!
+//! Windows are encoded in tiles with a halo wide enough that every kept feature sees exactly what
+//! a one-shot encoding of the window would: memory stays bounded for large maps (the second
+//! stage's im2col of a 640 × 640 window would take 0.6 GB in the paper network).
+//!
+//! Memory: N × C × (rotated map's bounding box + 2 × 3.2 m margin, at 0.2 m) floats — an 8 × 10 m
+//! apartment at N = 32, C = 8: ≈ 8 MB; a 30 × 50 m warehouse ≈ 85 MB (×4 with `pool_phases`).
+
+use super::map_encoder::MapActivations;
+use super::model::PfNet;
+use super::spatial_transformer::{LocalMapSpec, MapView, crop_local_maps};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::TAU;
+
+/// Feature cells per tile side (plus the halo): the paper's second-stage im2col of one tile then
+/// takes 1,600 taps × 80² pixels ≈ 41 MB per thread.
+const TILE: usize = 64;
+/// Poses per parallel task of `crop_features`.
+const CROP_CHUNK: usize = 64;
+
+/// How many orientations the bank holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FeatureCacheSpec {
+    /// N: headings 2π·o/N; a particle's heading is at most π/N from one of them.
+    pub orientations: usize,
+    /// Also encode the window shifted by one pixel down, right and both, so the bank holds
+    /// features every 0.1 m instead of 0.2 m (every phase of the stride-2 pool): 4× the memory
+    /// and build time, a particle's features interpolated 0.1 m apart instead of 0.2 m.
+    pub pool_phases: bool,
+}
+
+impl Default for FeatureCacheSpec {
+    fn default() -> Self {
+        Self { orientations: 32, pool_phases: false }
+    }
+}
+
+/// One orientation's encoded window.
+#[derive(Clone, Debug)]
+struct Orientation {
+    /// World unit vectors of the window's up (heading φ_o) and right.
+    up: [f64; 2],
+    right: [f64; 2],
+    /// World position of the window's top-left corner T.
+    corner: [f64; 2],
+    /// Bank cells: window pixels / 2, or window pixels with every pool phase.
+    rows: usize,
+    cols: usize,
+    /// [rows][cols][channels]: channels last, so a bilinear tap reads one contiguous run.
+    features: Vec<f32>,
+}
+
+/// The map encoded at every orientation; see the module doc for the geometry.
+#[derive(Clone, Debug)]
+pub struct FeatureBank {
+    orientations: Vec<Orientation>,
+    channels: usize,
+    /// Side of a particle's local map, pixels (n), and one pixel's side δ, metres.
+    side: usize,
+    cell_m: f64,
+    /// Window pixels between neighbouring bank cells: 2, or 1 with every pool phase.
+    pixels_per_cell: f64,
+}
+
+/// A build thread's buffers.
+#[derive(Default)]
+struct Scratch {
+    acts: MapActivations,
+    image: Vec<f32>,
+    tile: Vec<f32>,
+}
+
+impl FeatureBank {
+    /// Encodes `map` at every orientation with `model`'s map encoder (parallel over orientations
+    /// with rayon; the result does not depend on the thread count).
+    ///
+    /// # Panics
+    /// If `spec.orientations` is 0, the model's map has more than one channel (the spatial
+    /// transformer renders one), or the map view is malformed (see `crop_local_maps`).
+    pub fn build(model: &PfNet, map: &MapView, spec: &FeatureCacheSpec) -> Self {
+        Self::build_tiled(model, map, spec, TILE)
+    }
+
+    fn build_tiled(model: &PfNet, map: &MapView, spec: &FeatureCacheSpec, tile: usize) -> Self {
+        assert!(spec.orientations > 0, "a feature bank needs at least one orientation");
+        assert_eq!(model.config.map_channels, 1, "the spatial transformer renders one map channel");
+        let local = model.config.local_map;
+        let half = local.cells / 2;
+        let channels = model.map_feature_len() / (half * half);
+        let orientations = (0..spec.orientations)
+            .into_par_iter()
+            .map_init(Scratch::default, |scratch, o| {
+                let heading = TAU * o as f64 / spec.orientations as f64;
+                encode_orientation(model, map, heading, spec.pool_phases, tile, scratch)
+            })
+            .collect();
+        let pixels_per_cell = if spec.pool_phases { 1.0 } else { 2.0 };
+        Self { orientations, channels, side: local.cells, cell_m: f64::from(local.cell_m), pixels_per_cell }
+    }
+
+    /// Bytes held by the feature banks.
+    pub fn memory_bytes(&self) -> usize {
+        self.orientations.iter().map(|o| o.features.len() * size_of::<f32>()).sum::<usize>()
+            + size_of::<Self>()
+            + self.orientations.len() * size_of::<Orientation>()
+    }
+
+    /// For each pose (world x, y, yaw) writes its map features into out[k] ([k][channels][n/2][n/2],
+    /// the layout of the exact path's encoder output). Poses beyond the margin read the window's
+    /// edge (the features of all-occupied space); non-finite poses read a corner of it.
+    ///
+    /// # Panics
+    /// If `xs`, `ys` and `yaws` differ in length or `out.len()` is not poses × feature length.
+    pub fn crop_features(&self, xs: &[f32], ys: &[f32], yaws: &[f32], out: &mut [f32]) {
+        let len = self.channels * (self.side / 2).pow(2);
+        assert!(xs.len() == ys.len() && xs.len() == yaws.len(), "one x, y and yaw per pose");
+        assert_eq!(out.len(), xs.len() * len, "out holds poses × map feature length");
+        if len == 0 {
+            return;
+        }
+        out.par_chunks_mut(CROP_CHUNK * len).enumerate().for_each(|(chunk, block)| {
+            for (k, features) in block.chunks_exact_mut(len).enumerate() {
+                let k = chunk * CROP_CHUNK + k;
+                self.crop_one(xs[k], ys[k], yaws[k], features);
+            }
+        });
+    }
+
+    fn crop_one(&self, x: f32, y: f32, yaw: f32, out: &mut [f32]) {
+        let (x, y, yaw) = (f64::from(x), f64::from(y), f64::from(yaw));
+        let count = self.orientations.len();
+        let nearest = ((yaw * count as f64 / TAU).round() as i64).rem_euclid(count as i64) as usize;
+        let bank = &self.orientations[nearest];
+        let (sin, cos) = yaw.sin_cos();
+        let (n, d) = (self.side as f64, self.cell_m);
+        // Bank coordinates (I, J) of the point `forward`, `left` pixels from the particle.
+        let to_bank = |forward: f64, left: f64| {
+            let q = [x + (forward * cos - left * sin) * d, y + (forward * sin + left * cos) * d];
+            let (tq, qt) = (
+                [bank.corner[0] - q[0], bank.corner[1] - q[1]],
+                [q[0] - bank.corner[0], q[1] - bank.corner[1]],
+            );
+            let rho = (tq[0] * bank.up[0] + tq[1] * bank.up[1]) / d;
+            let kappa = (qt[0] * bank.right[0] + qt[1] * bank.right[1]) / d;
+            [(rho - 1.5) / self.pixels_per_cell, (kappa - 1.5) / self.pixels_per_cell]
+        };
+        // Feature (i, j) is centred at forward = n − 2i − 1.5, left = n/2 − 2j − 1.5 pixels: affine in (i, j).
+        let first = to_bank(n - 1.5, n / 2.0 - 1.5);
+        let next_i = to_bank(n - 3.5, n / 2.0 - 1.5);
+        let next_j = to_bank(n - 1.5, n / 2.0 - 3.5);
+        let di = [(next_i[0] - first[0]) as f32, (next_i[1] - first[1]) as f32];
+        let dj = [(next_j[0] - first[0]) as f32, (next_j[1] - first[1]) as f32];
+        let first = [first[0] as f32, first[1] as f32];
+
+        let (half, c) = (self.side / 2, self.channels);
+        let (max_u, max_v) = ((bank.rows - 1) as f32, (bank.cols - 1) as f32);
+        for i in 0..half {
+            for j in 0..half {
+                // `max` first: NaN becomes 0, a corner of the window.
+                let u = (first[0] + i as f32 * di[0] + j as f32 * dj[0]).max(0.0).min(max_u);
+                let v = (first[1] + i as f32 * di[1] + j as f32 * dj[1]).max(0.0).min(max_v);
+                let (i0, j0) = ((u as usize).min(bank.rows - 2), (v as usize).min(bank.cols - 2));
+                let (fu, fv) = (u - i0 as f32, v - j0 as f32);
+                let top = (i0 * bank.cols + j0) * c;
+                let bottom = top + bank.cols * c;
+                let (t, b) = (&bank.features[top..top + 2 * c], &bank.features[bottom..bottom + 2 * c]);
+                for ch in 0..c {
+                    let upper = t[ch] + fv * (t[c + ch] - t[ch]);
+                    let lower = b[ch] + fv * (b[c + ch] - b[ch]);
+                    out[(ch * half + i) * half + j] = upper + fu * (lower - upper);
+                }
+            }
+        }
+    }
+}
+
+/// Renders the window of heading `heading` (map + margin) and encodes it tile by tile.
+fn encode_orientation(
+    model: &PfNet,
+    map: &MapView,
+    heading: f64,
+    phases: bool,
+    tile: usize,
+    s: &mut Scratch,
+) -> Orientation {
+    let local = model.config.local_map;
+    let d = f64::from(local.cell_m);
+    // A feature of a particle on the map reaches √(2.8² + 1.4²) ≈ 3.1 m away; two more feature
+    // cells keep the second stage's 5 × 5 convolution off the window's edge.
+    let margin = (local.cells + 4) as f64;
+    let (sin, cos) = heading.sin_cos();
+    let (up, right) = ([cos, sin], [sin, -cos]);
+
+    // The map's corners along up and right, in pixels.
+    let (osin, ocos) = f64::from(map.origin_yaw_rad).sin_cos();
+    let (w, h) =
+        (map.width as f64 * f64::from(map.resolution_m), map.height as f64 * f64::from(map.resolution_m));
+    let (mut up_range, mut right_range) = ([f64::MAX, f64::MIN], [f64::MAX, f64::MIN]);
+    for (gx, gy) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
+        let q = [
+            f64::from(map.origin_x_m) + ocos * gx - osin * gy,
+            f64::from(map.origin_y_m) + osin * gx + ocos * gy,
+        ];
+        let (a, b) = ((q[0] * up[0] + q[1] * up[1]) / d, (q[0] * right[0] + q[1] * right[1]) / d);
+        up_range = [up_range[0].min(a), up_range[1].max(a)];
+        right_range = [right_range[0].min(b), right_range[1].max(b)];
+    }
+    // Even sides, so pool windows start on even pixels as in a local map.
+    let even = |extent: f64| 2 * ((extent + 2.0 * margin) / 2.0).ceil() as usize;
+    let (px_rows, px_cols) = (even(up_range[1] - up_range[0]), even(right_range[1] - right_range[0]));
+    // ρ = margin at the map's farthest point ahead, κ = margin at its leftmost.
+    let (t_up, t_right) = ((up_range[1] + margin) * d, (right_range[0] - margin) * d);
+    let corner = [t_up * up[0] + t_right * right[0], t_up * up[1] + t_right * right[1]];
+
+    // The spatial transformer's square crop whose top-left corner is T; the window is its top-left part.
+    let side = px_rows.max(px_cols) + 2; // one more pixel for the shifted pool phases
+    let sf = side as f64 * d;
+    let pose = [corner[0] - sf * up[0] + sf / 2.0 * right[0], corner[1] - sf * up[1] + sf / 2.0 * right[1]];
+    s.image.resize(side * side, 0.0);
+    let spec = LocalMapSpec { cells: side, cell_m: local.cell_m };
+    crop_local_maps(map, &[pose[0] as f32], &[pose[1] as f32], &[heading as f32], &spec, &mut s.image);
+
+    let (rows, cols) = (px_rows / 2, px_cols / 2);
+    let channels = model.map_feature_len() / (local.cells / 2).pow(2);
+    let (stride, shifts): (usize, &[(usize, usize)]) =
+        if phases { (2, &[(0, 0), (0, 1), (1, 0), (1, 1)]) } else { (1, &[(0, 0)]) };
+    let (bank_rows, bank_cols) = (rows * stride, cols * stride);
+    let mut features = vec![0.0; bank_rows * bank_cols * channels];
+    let halo = halo(model);
+    let encoder = model.map_encoder();
+    // Shift (a, b): the pool's windows start at pixel (2I + a, 2J + b), bank cell (stride·I + a, stride·J + b).
+    for &(a, b) in shifts {
+        for r0 in (0..rows).step_by(tile) {
+            for c0 in (0..cols).step_by(tile) {
+                let (r1, c1) = ((r0 + tile).min(rows), (c0 + tile).min(cols));
+                // Feature rows/cols [a, b) of the window, encoded from its pixels [2a, 2b).
+                let (ra, rb) = (r0.saturating_sub(halo), (r1 + halo).min(rows));
+                let (ca, cb) = (c0.saturating_sub(halo), (c1 + halo).min(cols));
+                let (th, tw) = (2 * (rb - ra), 2 * (cb - ca));
+                s.tile.clear();
+                for pr in 2 * ra..2 * rb {
+                    s.tile.extend_from_slice(&s.image[(pr + a) * side + 2 * ca + b..][..tw]);
+                }
+                encoder.forward_sized(&model.params, &s.tile, 1, (th, tw), &mut s.acts);
+                let (fh, fw) = (th / 2, tw / 2);
+                for r in r0..r1 {
+                    for c in c0..c1 {
+                        let at = ((stride * r + a) * bank_cols + stride * c + b) * channels;
+                        let cell = &mut features[at..][..channels];
+                        for (ch, value) in cell.iter_mut().enumerate() {
+                            *value = s.acts.features[(ch * fh + r - ra) * fw + c - ca];
+                        }
+                    }
+                }
+            }
+        }
+    }
+    Orientation { up, right, corner, rows: bank_rows, cols: bank_cols, features }
+}
+
+/// Feature cells a tile must extend beyond the cells it keeps so they match a one-shot encoding:
+/// the second stage reaches r2 pooled cells, a pool window 2 pixels further, the first stage r1 pixels.
+fn halo(model: &PfNet) -> usize {
+    let reach = |branches: &[super::config::ConvBranch]| {
+        branches.iter().map(|b| ((b.kernel - 1) * b.dilation).div_ceil(2)).max().unwrap_or(0)
+    };
+    let (r1, r2) = (reach(&model.config.map_stage1), reach(&model.config.map_stage2));
+    r2 + (r1 + 1).div_ceil(2) + 1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::config::PfNetConfig;
+    use super::super::map_encoder::MapActivations;
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_pcg::Pcg64;
+
+    pub(super) struct TestMap {
+        occupancy: Vec<f32>,
+        width: usize,
+        height: usize,
+        pub(super) origin: (f32, f32, f32),
+    }
+
+    impl TestMap {
+        pub(super) fn view(&self) -> MapView<'_> {
+            MapView {
+                occupancy: &self.occupancy,
+                width: self.width,
+                height: self.height,
+                resolution_m: 0.1,
+                origin_x_m: self.origin.0,
+                origin_y_m: self.origin.1,
+                origin_yaw_rad: self.origin.2,
+            }
+        }
+    }
+
+    /// A 4 × 3 m room: outer walls, two inner walls with a door, a few boxes, blurred edges.
+    pub(super) fn room(seed: u64) -> TestMap {
+        let (width, height) = (40, 30);
+        let mut rng = Pcg64::seed_from_u64(seed);
+        let mut occ = vec![0.0f32; width * height];
+        let mut set = |i: usize, j: usize, v: f32| occ[j * width + i] = v;
+        for i in 0..width {
+            set(i, 0, 1.0);
+            set(i, height - 1, 1.0);
+        }
+        for j in 0..height {
+            set(0, j, 1.0);
+            set(width - 1, j, 1.0);
+            if !(12..20).contains(&j) {
+                set(17, j, 1.0);
+            }
+        }
+        for i in 17..32 {
+            set(i, 21, 0.8);
+        }
+        for _ in 0..6 {
+            let (i, j) = (rng.random_range(2..36), rng.random_range(2..26));
+            for (di, dj) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                set(i + di, j + dj, rng.random_range(0.5..1.0));
+            }
+        }
+        TestMap { occupancy: occ, width, height, origin: (-0.7, 0.4, 0.35) }
+    }
+
+    /// Exact path: crop each pose's local map, encode it.
+    pub(super) fn exact(model: &PfNet, map: &MapView, xs: &[f32], ys: &[f32], yaws: &[f32]) -> Vec<f32> {
+        let mut maps = vec![0.0; xs.len() * model.local_map_len()];
+        crop_local_maps(map, xs, ys, yaws, &model.config.local_map, &mut maps);
+        let mut features = vec![0.0; xs.len() * model.map_feature_len()];
+        model.encode_local_maps(&maps, xs.len(), &mut features, &mut Default::default());
+        features
+    }
+
+    pub(super) fn cached(
+        bank: &FeatureBank,
+        model: &PfNet,
+        xs: &[f32],
+        ys: &[f32],
+        yaws: &[f32],
+    ) -> Vec<f32> {
+        let mut features = vec![f32::NAN; xs.len() * model.map_feature_len()];
+        bank.crop_features(xs, ys, yaws, &mut features);
+        features
+    }
+
+    #[test]
+    fn aligned_pose_matches_exact_path() {
+        // A 56-pixel local map has 14 × 14 interior features whose receptive field (29 pixels)
+        // never meets the crop's zero padding; at 28 pixels none does.
+        let config = PfNetConfig {
+            local_map: LocalMapSpec { cells: 56, cell_m: 0.1 },
+            obs_cells: 112,
+            ..PfNetConfig::compact()
+        };
+        let model = PfNet::new(config, 3).unwrap();
+        let map = room(1);
+        for pool_phases in [false, true] {
+            let spec = FeatureCacheSpec { orientations: 8, pool_phases };
+            let bank = FeatureBank::build(&model, &map.view(), &spec);
+            let (n, half, channels) = (56.0, 28, bank.channels);
+            // With every pool phase an odd pixel offset is on the bank's grid too.
+            let (stride, shift) = if pool_phases { (2, 1.0) } else { (1, 0.0) };
+            for o in [0, 3, 6] {
+                let b = &bank.orientations[o];
+                // A pose whose local map's top-left pixel is window pixel (R0, C0): ρ(p) = R0 + n,
+                // κ(p) = C0 + n/2. Pick it near the map's middle.
+                let even = |cells: usize| (2 * (cells / stride / 2)) as f64 - 28.0 + shift;
+                let (r0, c0) = (even(b.rows), even(b.cols));
+                let (rho, kappa) = ((r0 + n) * 0.1, (c0 + n / 2.0) * 0.1);
+                let x = b.corner[0] - rho * b.up[0] + kappa * b.right[0];
+                let y = b.corner[1] - rho * b.up[1] + kappa * b.right[1];
+                let yaw = (TAU * o as f64 / 8.0) as f32;
+                let want = exact(&model, &map.view(), &[x as f32], &[y as f32], &[yaw]);
+                let got = cached(&bank, &model, &[x as f32], &[y as f32], &[yaw]);
+                let mut worst = 0.0f32;
+                for ch in 0..channels {
+                    for i in 7..=20 {
+                        for j in 7..=20 {
+                            let k = (ch * half + i) * half + j;
+                            worst = worst.max((got[k] - want[k]).abs());
+                        }
+                    }
+                }
+                let scale = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+                assert!(scale > 0.1, "features are not trivially zero");
+                assert!(
+                    worst < 2e-4 * scale.max(1.0),
+                    "{spec:?}, orientation {o}: worst interior difference {worst}"
+                );
+            }
+        }
+    }
+
+    fn ranks(v: &[f32]) -> Vec<f64> {
+        let mut order: Vec<usize> = (0..v.len()).collect();
+        order.sort_by(|&a, &b| v[a].total_cmp(&v[b]));
+        let mut r = vec![0.0; v.len()];
+        for (rank, &k) in order.iter().enumerate() {
+            r[k] = rank as f64;
+        }
+        r
+    }
+
+    fn spearman(a: &[f32], b: &[f32]) -> f64 {
+        let (ra, rb) = (ranks(a), ranks(b));
+        let m = (a.len() as f64 - 1.0) / 2.0;
+        let cov: f64 = ra.iter().zip(&rb).map(|(x, y)| (x - m) * (y - m)).sum();
+        let var: f64 = ra.iter().map(|x| (x - m).powi(2)).sum();
+        cov / var
+    }
+
+    /// The encoder without the crop's border: a local map padded by `m` pixels of real context on
+    /// every side, encoded, its central features kept. What a bank crop approximates.
+    pub(super) fn with_context(
+        model: &PfNet,
+        map: &MapView,
+        xs: &[f32],
+        ys: &[f32],
+        yaws: &[f32],
+    ) -> Vec<f32> {
+        let (n, m) = (model.config.local_map.cells, 16);
+        let (side, half, len) = (n + 2 * m, n / 2, model.map_feature_len());
+        let spec = LocalMapSpec { cells: side, ..model.config.local_map };
+        let (mut image, mut acts) = (vec![0.0; side * side], MapActivations::default());
+        let mut out = vec![0.0; xs.len() * len];
+        for (k, features) in out.chunks_exact_mut(len).enumerate() {
+            // Stepping m pixels back puts the n-pixel local map at rows and columns m… of the crop.
+            let back = m as f32 * spec.cell_m;
+            let (x, y) = (xs[k] - back * yaws[k].cos(), ys[k] - back * yaws[k].sin());
+            crop_local_maps(map, &[x], &[y], &[yaws[k]], &spec, &mut image);
+            model.map_encoder().forward_sized(&model.params, &image, 1, (side, side), &mut acts);
+            let full = side / 2;
+            for (ch, plane) in features.chunks_exact_mut(half * half).enumerate() {
+                for (i, row) in plane.chunks_exact_mut(half).enumerate() {
+                    let at = (ch * full + m / 2 + i) * full + m / 2;
+                    row.copy_from_slice(&acts.features[at..at + half]);
+                }
+            }
+        }
+        out
+    }
+
+    fn relative(got: &[f32], want: &[f32]) -> f64 {
+        let norm = |v: &mut dyn Iterator<Item = f32>| v.map(|x| f64::from(x).powi(2)).sum::<f64>().sqrt();
+        norm(&mut got.iter().zip(want).map(|(a, b)| a - b)) / norm(&mut want.iter().copied())
+    }
+
+    /// Cached against exact and against the border-free encoder, on random poses in a room; the
+    /// log-likelihoods come from the joint stage with one random observation.
+    fn agreement(config: PfNetConfig, specs: &[FeatureCacheSpec]) -> Vec<[f64; 4]> {
+        let model = PfNet::new(config, 0).unwrap();
+        let map = room(2);
+        let view = map.view();
+        let mut rng = Pcg64::seed_from_u64(5);
+        let k = 96;
+        let (mut xs, mut ys, mut yaws) = (vec![], vec![], vec![]);
+        let (sin, cos) = map.origin.2.sin_cos();
+        for _ in 0..k {
+            let (gx, gy) = (rng.random_range(0.2..3.8f32), rng.random_range(0.2..2.8f32));
+            xs.push(map.origin.0 + cos * gx - sin * gy);
+            ys.push(map.origin.1 + sin * gx + cos * gy);
+            yaws.push(rng.random_range(-4.0..4.0f32));
+        }
+        let obs: Vec<f32> = (0..model.obs_len()).map(|_| f32::from(rng.random_bool(0.2))).collect();
+        let mut ws = Default::default();
+        let mut obs_features = vec![0.0; model.obs_feature_len()];
+        model.encode_observations(&obs, 1, &mut obs_features, &mut ws);
+        let owner = vec![0u32; k];
+        let mut loglik = |features: &[f32]| {
+            let mut out = vec![0.0; k];
+            model.joint_log_likelihoods(features, &obs_features, &owner, &mut out, &mut ws);
+            out
+        };
+        let exact_features = exact(&model, &view, &xs, &ys, &yaws);
+        let context_features = with_context(&model, &view, &xs, &ys, &yaws);
+        let (exact_ll, context_ll) = (loglik(&exact_features), loglik(&context_features));
+        println!(
+            "{} network, {k} poses: border-free vs exact: relative feature error {:.3}, rank correlation {:.3}",
+            if model.config == PfNetConfig::paper() { "paper" } else { "compact" },
+            relative(&context_features, &exact_features),
+            spearman(&context_ll, &exact_ll)
+        );
+        specs
+            .iter()
+            .map(|spec| {
+                let bank = FeatureBank::build(&model, &view, spec);
+                let got = cached(&bank, &model, &xs, &ys, &yaws);
+                let ll = loglik(&got);
+                let row = [
+                    relative(&got, &exact_features),
+                    spearman(&ll, &exact_ll),
+                    relative(&got, &context_features),
+                    spearman(&ll, &context_ll),
+                ];
+                println!(
+                    "  N = {}, pool phases {}: cached vs exact {:.3} / {:.3}, cached vs border-free {:.3} / {:.3} \
+                     (relative feature error / log-likelihood rank correlation), bank {:.2} MB",
+                    spec.orientations,
+                    spec.pool_phases,
+                    row[0],
+                    row[1],
+                    row[2],
+                    row[3],
+                    bank.memory_bytes() as f64 / 1e6
+                );
+                row
+            })
+            .collect()
+    }
+
+    #[test]
+    fn random_poses_are_close_to_exact() {
+        let [to_exact, rank_exact, to_context, rank_context] =
+            agreement(PfNetConfig::compact(), &[FeatureCacheSpec::default()])[0];
+        // The exact path's crop border (zero padding, seen by every feature: the receptive field
+        // is 29 pixels) dominates the difference; without it the cache is much closer.
+        assert!(to_exact < 0.6 && rank_exact > 0.5, "cached vs exact: {to_exact}, {rank_exact}");
+        assert!(
+            to_context < 0.3 && rank_context > 0.75,
+            "cached vs border-free: {to_context}, {rank_context}"
+        );
+    }
+
+    #[test]
+    #[ignore = "measurement: several orientation counts and the paper network (a few seconds)"]
+    fn agreement_report() {
+        let specs = |phases| {
+            [8, 16, 32, 64].map(|orientations| FeatureCacheSpec { orientations, pool_phases: phases })
+        };
+        agreement(PfNetConfig::compact(), &[specs(false), specs(true)].concat());
+        agreement(PfNetConfig::paper(), &[specs(false), specs(true)].concat());
+    }
+
+    #[test]
+    fn building_is_deterministic_and_tiling_is_invisible() {
+        let model = PfNet::new(PfNetConfig::compact(), 7).unwrap();
+        let map = room(3);
+        let spec = FeatureCacheSpec { orientations: 4, pool_phases: true };
+        let a = FeatureBank::build(&model, &map.view(), &spec);
+        let b = FeatureBank::build(&model, &map.view(), &spec);
+        let tiny = FeatureBank::build_tiled(&model, &map.view(), &spec, 5);
+        for ((a, b), t) in a.orientations.iter().zip(&b.orientations).zip(&tiny.orientations) {
+            assert_eq!(a.features, b.features, "two builds differ");
+            let worst = a.features.iter().zip(&t.features).fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+            assert!(worst < 1e-4, "tiles of 5 cells differ from tiles of {TILE} by {worst}");
+        }
+        // Far off the map and NaN poses still give finite features.
+        let out = cached(&a, &model, &[-50.0, f32::NAN], &[3.0, 0.0], &[0.3, 1.0]);
+        assert!(out.iter().all(|v| v.is_finite()));
+    }
+}

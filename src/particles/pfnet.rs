@@ -1,0 +1,208 @@
+//! PF-net as the filter's observation model: a drop-in for `mcl_likelihood_field` that adds the
+//! network's log-likelihoods to the particles' log-weights, with one batched forward pass over
+//! every particle of every robot in the world.
+
+use crate::compose::{StepParams, expect_param};
+use crate::nn::pfnet::{
+    FeatureBank, FeatureCacheSpec, LocalMapSpec, MapView, PfNet, PfNetConfig, Workspaces, crop_local_maps,
+};
+use crate::particles::set::{
+    FilterHealth, LikelihoodStats, ObservationModel, ParticleSet, record_observation,
+};
+use crate::sense::LocalGrid;
+use crate::world::OnMap;
+use crate::world::map::NetworkMap;
+use bevy::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::{Arc, Mutex, OnceLock};
+
+/// How a particle's map features are computed.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum MapFeatures {
+    /// Crop the particle's local map, then run the map encoder on it (the paper).
+    #[default]
+    Exact,
+    /// Crop from the map's feature banks, encoded once per map at a few orientations.
+    Cached,
+}
+
+/// Which network weighs the particles and how.
+#[derive(Resource, Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct PfNetLikelihoodParams {
+    /// A PF-net checkpoint (safetensors, as `apfn train-pfnet` writes), relative to the working
+    /// directory; `None`: an untrained network of `config` with weights from `seed`, for wiring
+    /// and speed tests only.
+    pub checkpoint: Option<String>,
+    /// `paper` or `compact`, used without a checkpoint.
+    pub config: String,
+    /// Seed of the untrained network's weights.
+    pub seed: u64,
+    /// `exact` (the paper) or `cached` (beyond the paper: see `nn::pfnet::FeatureBank`).
+    pub features: MapFeatures,
+    /// Orientations the cached feature banks are encoded at (2π / N apart).
+    pub orientations: usize,
+}
+
+impl Default for PfNetLikelihoodParams {
+    fn default() -> Self {
+        Self {
+            checkpoint: None,
+            config: "paper".into(),
+            seed: 0,
+            features: MapFeatures::Exact,
+            orientations: FeatureCacheSpec::default().orientations,
+        }
+    }
+}
+
+impl StepParams for PfNetLikelihoodParams {
+    /// Loads the network (once per process), so a missing or broken checkpoint fails when the
+    /// schedule loads, naming the file.
+    fn check(&self) -> Result<(), String> {
+        expect_param((1..=1024).contains(&self.orientations), "orientations", "1 to 1024")?;
+        shared_model(self).map(|_| ())
+    }
+}
+
+/// The network for `params`, loaded once per process and shared read-only by every world (eval
+/// runs one world per cell in parallel; each would otherwise load its own copy).
+pub fn shared_model(params: &PfNetLikelihoodParams) -> Result<Arc<PfNet>, String> {
+    static MODELS: OnceLock<Mutex<HashMap<String, Arc<PfNet>>>> = OnceLock::new();
+    let key = match &params.checkpoint {
+        Some(path) => format!("file:{path}"),
+        None => format!("untrained:{}:{}", params.config, params.seed),
+    };
+    let mut models = MODELS.get_or_init(Mutex::default).lock().unwrap_or_else(|p| p.into_inner());
+    if let Some(model) = models.get(&key) {
+        return Ok(model.clone());
+    }
+    let model = match &params.checkpoint {
+        Some(path) => PfNet::load(Path::new(path)).map_err(|e| format!("checkpoint: {e}"))?,
+        None => {
+            let config = PfNetConfig::named(&params.config)
+                .ok_or_else(|| format!("config: expected `paper` or `compact`, found `{}`", params.config))?;
+            PfNet::new(config, params.seed).map_err(|e| format!("config: {e}"))?
+        }
+    };
+    let model = Arc::new(model);
+    models.insert(key, model.clone());
+    Ok(model)
+}
+
+/// The system's buffers and caches, kept across steps (the filter path allocates nothing once warm).
+#[derive(Default)]
+pub struct PfNetState {
+    model: Option<Arc<PfNet>>,
+    pool: Option<Workspaces>,
+    /// Feature banks per map entity, built on first use.
+    banks: HashMap<Entity, Arc<FeatureBank>>,
+    obs: Vec<f32>,
+    obs_features: Vec<f32>,
+    owner: Vec<u32>,
+    inputs: Vec<f32>,
+    loglik: Vec<f32>,
+}
+
+/// Reads LocalGrid, OnMap → the map's NetworkMap, PfNetLikelihoodParams. Writes ParticleSet
+/// weights, LikelihoodStats, FilterHealth.degeneracies.
+pub fn pfnet_likelihood(
+    params: Res<PfNetLikelihoodParams>,
+    maps: Query<&NetworkMap>,
+    mut robots: Query<(&LocalGrid, &OnMap, &mut ParticleSet, &mut FilterHealth, &mut LikelihoodStats)>,
+    mut state: Local<PfNetState>,
+) {
+    let state = &mut *state;
+    if state.model.is_none() {
+        match shared_model(&params) {
+            Ok(model) => state.model = Some(model),
+            Err(e) => return tracing::warn!("pfnet_likelihood: {e}"),
+        }
+    }
+    let model = state.model.clone().expect("loaded above");
+    let pool = state.pool.get_or_insert_with(Workspaces::for_current_pool);
+
+    // Gather: every robot's observation, every particle's local map (or map features).
+    let per_particle = match params.features {
+        MapFeatures::Exact => model.local_map_len(),
+        MapFeatures::Cached => model.map_feature_len(),
+    };
+    let (mut robot_count, mut particles) = (0usize, 0usize);
+    state.obs.clear();
+    state.owner.clear();
+    for (grid, on_map, set, ..) in &robots {
+        let Ok(map) = maps.get(on_map.0) else { continue };
+        if grid.values.len() != model.obs_len() || set.is_empty() {
+            continue;
+        }
+        state.obs.extend_from_slice(&grid.values);
+        state.owner.extend(std::iter::repeat_n(robot_count as u32, set.len()));
+        state.inputs.resize((particles + set.len()) * per_particle, 0.0);
+        let out = &mut state.inputs[particles * per_particle..];
+        match params.features {
+            MapFeatures::Exact => {
+                crop_local_maps(&map_view(map), &set.x, &set.y, &set.yaw, &LocalMapSpec::default(), out)
+            }
+            MapFeatures::Cached => {
+                let bank = state.banks.entry(on_map.0).or_insert_with(|| {
+                    let spec =
+                        FeatureCacheSpec { orientations: params.orientations, ..FeatureCacheSpec::default() };
+                    Arc::new(FeatureBank::build(&model, &map_view(map), &spec))
+                });
+                bank.crop_features(&set.x, &set.y, &set.yaw, out);
+            }
+        }
+        robot_count += 1;
+        particles += set.len();
+    }
+    if particles == 0 {
+        return;
+    }
+
+    // One batched forward pass for the whole world.
+    state.obs_features.resize(robot_count * model.obs_feature_len(), 0.0);
+    model.encode_observations_par(&state.obs, &mut state.obs_features, pool);
+    state.loglik.resize(particles, 0.0);
+    let (inputs, owner) = (&state.inputs[..particles * per_particle], &state.owner);
+    match params.features {
+        MapFeatures::Exact => {
+            model.log_likelihoods_exact(&state.obs_features, owner, inputs, &mut state.loglik, pool)
+        }
+        MapFeatures::Cached => {
+            model.log_likelihoods_from_features(&state.obs_features, owner, inputs, &mut state.loglik, pool)
+        }
+    }
+
+    // Scatter, in the same order as the gather.
+    let mut first = 0;
+    for (grid, on_map, mut set, mut health, mut stats) in &mut robots {
+        if maps.get(on_map.0).is_err() || grid.values.len() != model.obs_len() || set.is_empty() {
+            continue;
+        }
+        let loglik = &state.loglik[first..first + set.len()];
+        first += set.len();
+        let outcome = set.weigh_with(|set| {
+            for (w, l) in set.log_w.iter_mut().zip(loglik) {
+                *w += l;
+            }
+            Ok(())
+        });
+        record_observation(ObservationModel::PfNet, outcome, &mut health, &mut stats);
+    }
+}
+
+/// The engine's read-only view of a map's network layer.
+pub fn map_view(map: &NetworkMap) -> MapView<'_> {
+    MapView {
+        occupancy: &map.occupancy,
+        width: map.width,
+        height: map.height,
+        resolution_m: map.resolution_m,
+        origin_x_m: map.origin.x,
+        origin_y_m: map.origin.y,
+        origin_yaw_rad: map.origin.yaw,
+    }
+}
