@@ -3,7 +3,12 @@
 
 use crate::cli::set_threads;
 use crate::nn::adam::{Adam, AdamConfig};
-use crate::nn::pfnet::{GradBuffers, PfNet, PfNetConfig, PoseLoss, StepBatch, Workspaces, verify};
+use crate::nn::pfnet::{
+    FeatureBank, FeatureCacheSpec, GradBuffers, PfNet, PfNetConfig, PoseLoss, StepBatch, Workspaces, verify,
+};
+use crate::particles::map_view;
+use crate::world::map::NetworkMap;
+use crate::world::map::procedural::{ApartmentParams, generate_apartment};
 use anyhow::Context;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -42,6 +47,10 @@ pub struct BenchArgs {
     /// Timed repetitions (after two untimed ones); the median is reported.
     #[arg(long, default_value_t = 10)]
     pub reps: usize,
+    /// Map features per particle: `exact` (crop + map encoder, the paper) or `cached` (crop of the
+    /// map's feature banks, built once on a procedural apartment before timing).
+    #[arg(long, value_enum, default_value_t = FeaturePath::Exact)]
+    pub features: FeaturePath,
     /// Time a training step (forward, backward, Adam) instead of a filter step.
     #[arg(long)]
     pub train: bool,
@@ -51,6 +60,12 @@ pub struct BenchArgs {
     /// Filter steps per training sequence.
     #[arg(long, default_value_t = 25)]
     pub steps: usize,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FeaturePath {
+    Exact,
+    Cached,
 }
 
 pub fn run(cmd: PfNetCommand) -> anyhow::Result<()> {
@@ -117,13 +132,36 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         })
     } else {
         let k = args.particles;
-        let (obs, maps) = (uniform(model.obs_len()), uniform(k * model.local_map_len()));
         let owner = vec![0u32; k];
         let (mut obs_features, mut loglik) = (vec![0.0; model.obs_feature_len()], vec![0.0; k]);
-        time(args.reps, || {
-            model.encode_observations_par(&obs, &mut obs_features, &pool);
-            model.log_likelihoods_exact(&obs_features, &owner, &maps, &mut loglik, &pool);
-        })
+        let obs = uniform(model.obs_len());
+        match args.features {
+            // Local maps as network input, like the Keras peer's benchmark.
+            FeaturePath::Exact => {
+                let maps = uniform(k * model.local_map_len());
+                time(args.reps, || {
+                    model.encode_observations_par(&obs, &mut obs_features, &pool);
+                    model.log_likelihoods_exact(&obs_features, &owner, &maps, &mut loglik, &pool);
+                })
+            }
+            FeaturePath::Cached => {
+                let apartment = generate_apartment(0, &ApartmentParams::default());
+                let map = NetworkMap::from_fine(&apartment, 0.1);
+                let bank = FeatureBank::build(&model, &map_view(&map), &FeatureCacheSpec::default());
+                let (w, h) = apartment.size_m();
+                let poses = uniform(3 * k);
+                let xs: Vec<f32> = poses[..k].iter().map(|u| u * w).collect();
+                let ys: Vec<f32> = poses[k..2 * k].iter().map(|u| u * h).collect();
+                let yaws: Vec<f32> =
+                    poses[2 * k..].iter().map(|u| (u - 0.5) * std::f32::consts::TAU).collect();
+                let mut features = vec![0.0; k * model.map_feature_len()];
+                time(args.reps, || {
+                    model.encode_observations_par(&obs, &mut obs_features, &pool);
+                    bank.crop_features(&xs, &ys, &yaws, &mut features);
+                    model.log_likelihoods_from_features(&obs_features, &owner, &features, &mut loglik, &pool);
+                })
+            }
+        }
     };
     let ms = median(timings) * 1e3;
     let mut out = serde_json::json!({ "ms_per_step": round(ms), "peak_rss_mb": peak_rss_mb() });

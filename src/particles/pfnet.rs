@@ -206,3 +206,98 @@ pub fn map_view(map: &NetworkMap) -> MapView<'_> {
         origin_yaw_rad: map.origin.yaw,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::pfnet::Workspace;
+    use crate::testing::tiny_room;
+    use crate::world::Pose2;
+    use bevy::ecs::system::RunSystemOnce;
+
+    const POSES: [Pose2; 3] =
+        [Pose2::new(0.5, 0.5, 0.0), Pose2::new(1.2, 0.8, 1.5), Pose2::new(1.6, 1.1, -2.5)];
+
+    fn grid(seed: usize) -> LocalGrid {
+        LocalGrid { cells: 56, values: (0..56 * 56).map(|i| ((i * 7 + seed) % 3) as f32 / 2.0).collect() }
+    }
+
+    /// A world with the tiny room's network map and one robot per grid, each with `POSES`.
+    fn world_with_robots(grids: &[LocalGrid], features: MapFeatures) -> (World, Vec<Entity>) {
+        let mut world = World::new();
+        let params = PfNetLikelihoodParams { config: "compact".into(), features, ..Default::default() };
+        world.insert_resource(params);
+        let map = world.spawn(NetworkMap::from_fine(&tiny_room(), 0.1)).id();
+        let robots = grids
+            .iter()
+            .map(|g| world.spawn((g.clone(), OnMap(map), ParticleSet::from_poses(&POSES))).id())
+            .collect();
+        (world, robots)
+    }
+
+    /// The network's weights for `POSES` and `grid`, computed layer by layer without the system.
+    fn expected_weights(grid: &LocalGrid) -> Vec<f32> {
+        let model =
+            shared_model(&PfNetLikelihoodParams { config: "compact".into(), ..Default::default() }).unwrap();
+        let map = NetworkMap::from_fine(&tiny_room(), 0.1);
+        let mut ws = Workspace::default();
+        let (xs, ys, yaws): (Vec<f32>, Vec<f32>, Vec<f32>) = (
+            POSES.iter().map(|p| p.x).collect(),
+            POSES.iter().map(|p| p.y).collect(),
+            POSES.iter().map(|p| p.yaw).collect(),
+        );
+        let mut maps = vec![0.0; 3 * model.local_map_len()];
+        crop_local_maps(&map_view(&map), &xs, &ys, &yaws, &LocalMapSpec::default(), &mut maps);
+        let (mut of, mut mf) = (vec![0.0; model.obs_feature_len()], vec![0.0; 3 * model.map_feature_len()]);
+        model.encode_observations(&grid.values, 1, &mut of, &mut ws);
+        model.encode_local_maps(&maps, 3, &mut mf, &mut ws);
+        let mut loglik = vec![0.0; 3];
+        model.joint_log_likelihoods(&mf, &of, &[0, 0, 0], &mut loglik, &mut ws);
+        let total: f32 = loglik.iter().map(|l| l.exp()).sum();
+        loglik.iter().map(|l| l.exp() / total).collect()
+    }
+
+    #[test]
+    fn pfnet_likelihood_weighs_every_robot_with_its_own_observation_in_one_batch() {
+        let grids = [grid(0), grid(1)];
+        let (mut world, robots) = world_with_robots(&grids, MapFeatures::Exact);
+        world.run_system_once(pfnet_likelihood).expect("system runs");
+        for (robot, grid) in robots.iter().zip(&grids) {
+            let weights = world.get::<ParticleSet>(*robot).unwrap().weights();
+            let want = expected_weights(grid);
+            for (w, e) in weights.iter().zip(&want) {
+                assert!(
+                    (w - e).abs() < 1e-5,
+                    "batched weights {weights:?} differ from one robot alone {want:?}"
+                );
+            }
+            let stats = world.get::<LikelihoodStats>(*robot).unwrap();
+            assert_eq!((stats.model, stats.updates), (ObservationModel::PfNet, 1), "the update is booked");
+        }
+        let (a, b) =
+            (world.get::<ParticleSet>(robots[0]).unwrap(), world.get::<ParticleSet>(robots[1]).unwrap());
+        assert_ne!(a.log_w, b.log_w, "different observations must give different weights");
+    }
+
+    #[test]
+    fn pfnet_likelihood_cached_features_keep_weights_normalised() {
+        let (mut world, robots) = world_with_robots(&[grid(2)], MapFeatures::Cached);
+        world.run_system_once(pfnet_likelihood).expect("system runs");
+        let weights = world.get::<ParticleSet>(robots[0]).unwrap().weights();
+        assert!((weights.iter().sum::<f32>() - 1.0).abs() < 1e-5, "weights sum to one: {weights:?}");
+        assert!(
+            weights.iter().any(|&w| (w - 1.0 / 3.0).abs() > 1e-4),
+            "the network must tell particles apart"
+        );
+    }
+
+    #[test]
+    fn pfnet_likelihood_rejects_a_missing_checkpoint_naming_it() {
+        let params = PfNetLikelihoodParams {
+            checkpoint: Some("no/such/pfnet.safetensors".into()),
+            ..Default::default()
+        };
+        let err = params.check().unwrap_err();
+        assert!(err.contains("no/such/pfnet.safetensors"), "the error must name the file: {err}");
+    }
+}
