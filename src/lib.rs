@@ -25,6 +25,8 @@ pub mod episode;
 
 pub mod nn;
 
+pub mod train;
+
 pub mod compose;
 
 pub mod eval;

@@ -8,6 +8,7 @@ pub mod record;
 pub mod run;
 pub mod sweep;
 pub mod systems;
+pub mod train_pfnet;
 
 use clap::{Parser, Subcommand};
 
@@ -37,6 +38,8 @@ pub enum Command {
     /// PF-net, the learned observation model: size, check against the Keras reference, speed.
     #[command(subcommand)]
     Pfnet(pfnet::PfNetCommand),
+    /// Train PF-net on simulated episodes (supervised, as the paper), with checkpoints and resume.
+    TrainPfnet(train_pfnet::TrainPfNetArgs),
     /// List the registered systems with their parameters.
     #[command(subcommand)]
     Systems(systems::SystemsCommand),
@@ -53,6 +56,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sweep(args) => sweep::run(args),
         Command::Pfnet(cmd) => pfnet::run(cmd),
         Command::Systems(cmd) => systems::run(cmd),
+        Command::TrainPfnet(args) => train_pfnet::run(args),
     }
 }
 

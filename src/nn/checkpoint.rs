@@ -121,6 +121,7 @@ impl Checkpoint {
         let bytes =
             safetensors::serialize(self.tensors.iter().map(|t| (t.name.as_str(), F32View(t))), metadata)
                 .map_err(|source| CheckpointError::Encode { path: path.to_path_buf(), source })?;
+        let bytes = canonical_header(bytes);
 
         let file_name = path.file_name().ok_or_else(|| {
             io("write", std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name"))
@@ -230,6 +231,29 @@ impl Checkpoint {
     }
 }
 
+/// The same file with its JSON header's keys sorted: safetensors writes the metadata from a
+/// `HashMap`, whose order changes from run to run, and the same state must give the same bytes
+/// (resumed training is checked byte for byte). Offsets are relative to the data section, so
+/// only the header (padded with spaces to 8 bytes, as safetensors does) changes.
+fn canonical_header(bytes: Vec<u8>) -> Vec<u8> {
+    type Header = std::collections::BTreeMap<String, serde_json::Value>;
+    let len = u64::from_le_bytes(bytes[..8].try_into().expect("8 length bytes")) as usize;
+    let mut header: Header =
+        serde_json::from_slice(&bytes[8..8 + len]).expect("safetensors wrote valid JSON");
+    if let Some(meta) = header.get_mut("__metadata__") {
+        let sorted: std::collections::BTreeMap<String, String> =
+            serde_json::from_value(meta.take()).expect("metadata maps strings to strings");
+        *meta = serde_json::to_value(sorted).expect("strings serialise");
+    }
+    let mut json = serde_json::to_vec(&header).expect("a JSON value serialises");
+    json.resize(json.len().div_ceil(8) * 8, b' ');
+    let mut out = Vec::with_capacity(8 + json.len() + bytes.len() - 8 - len);
+    out.extend_from_slice(&(json.len() as u64).to_le_bytes());
+    out.extend_from_slice(&json);
+    out.extend_from_slice(&bytes[8 + len..]);
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -267,6 +291,24 @@ mod tests {
             .collect();
         v.sort();
         v
+    }
+
+    #[test]
+    fn same_checkpoint_gives_the_same_bytes() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut ck = sample();
+        for k in 0..12 {
+            ck.metadata.insert(format!("key{k}"), k.to_string()); // enough keys to expose a hash order
+        }
+        let files: Vec<Vec<u8>> = (0..4)
+            .map(|i| {
+                let path = dir.path().join(format!("{i}.safetensors"));
+                ck.clone().save(&path).unwrap();
+                fs::read(&path).unwrap()
+            })
+            .collect();
+        assert!(files.windows(2).all(|w| w[0] == w[1]), "saving one state twice must write the same bytes");
+        assert_eq!(Checkpoint::load(&dir.path().join("0.safetensors")).unwrap().metadata, ck.metadata);
     }
 
     #[test]

@@ -11,7 +11,7 @@
 /// Pixels per tile: the stack accumulators (4 × TILE f32 in backward) stay in L1.
 const TILE: usize = 256;
 /// Independent partial sums for the per-channel reductions (dγ, dβ), so they vectorise.
-const LANES: usize = 8;
+const LANES: usize = 16;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LayerNorm {
@@ -143,11 +143,197 @@ impl LayerNorm {
         dbeta: &mut [f32],
         dx: &mut [f32],
     ) {
+        self.backward_dispatch::<false>(gamma, gamma, x, stats, dy, n, hw, dgamma, dbeta, dx);
+    }
+
+    /// `backward` of LayerNorm followed by ReLU, `dy` being the gradient at the ReLU's output.
+    /// The ReLU's mask is recomputed from x and the stats (the forward's exact arithmetic, so
+    /// the same bits), so the normalised activations need not be kept: for the map encoder
+    /// that is 200 KB per particle neither stored nor read back.
+    #[allow(clippy::too_many_arguments)]
+    pub fn backward_relu(
+        &self,
+        gamma: &[f32],
+        beta: &[f32],
+        x: &[f32],
+        stats: &[f32],
+        dy: &[f32],
+        n: usize,
+        hw: usize,
+        dgamma: &mut [f32],
+        dbeta: &mut [f32],
+        dx: &mut [f32],
+    ) {
+        assert_eq!(beta.len(), self.channels, "LayerNorm: beta length");
+        self.backward_dispatch::<true>(gamma, beta, x, stats, dy, n, hw, dgamma, dbeta, dx);
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn backward_dispatch<const RELU: bool>(
+        &self,
+        gamma: &[f32],
+        beta: &[f32],
+        x: &[f32],
+        stats: &[f32],
+        dy: &[f32],
+        n: usize,
+        hw: usize,
+        dgamma: &mut [f32],
+        dbeta: &mut [f32],
+        dx: &mut [f32],
+    ) {
         let c = self.channels;
         assert!(c > 0, "LayerNorm: no channels");
         assert!(gamma.len() == c && dgamma.len() == c && dbeta.len() == c, "LayerNorm: gamma length");
         assert!(x.len() == n * c * hw && dy.len() == x.len() && dx.len() == x.len(), "LayerNorm: x length");
         assert_eq!(stats.len(), n * hw * 2, "LayerNorm: stats length");
+        #[cfg(target_arch = "x86_64")]
+        if is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F.
+            return unsafe {
+                self.backward_avx512::<RELU>(gamma, beta, x, stats, dy, n, hw, dgamma, dbeta, dx)
+            };
+        }
+        self.backward_impl::<RELU>(gamma, beta, x, stats, dy, n, hw, dgamma, dbeta, dx);
+    }
+
+    /// `backward_impl` with explicit AVX-512 (masked tails, ReLU mask as a compare): the
+    /// auto-vectorised loops ran at ≈ 6 cycles per element. Measured per filter step
+    /// (examples/train_profile.rs, K = 30): ReLU + LayerNorm over 64 × 784 per particle, 5.6 ms →
+    /// 1.2 ms with the fused mask.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    #[allow(clippy::too_many_arguments)]
+    fn backward_avx512<const RELU: bool>(
+        &self,
+        gamma: &[f32],
+        beta: &[f32],
+        x: &[f32],
+        stats: &[f32],
+        dy: &[f32],
+        n: usize,
+        hw: usize,
+        dgamma: &mut [f32],
+        dbeta: &mut [f32],
+        dx: &mut [f32],
+    ) {
+        use std::arch::x86_64::*;
+        let c = self.channels;
+        let inv_c = 1.0 / c as f32;
+        let mut mean = [0.0f32; TILE];
+        let mut rstd = [0.0f32; TILE];
+        let mut s1 = [0.0f32; TILE];
+        let mut s2 = [0.0f32; TILE];
+        // SAFETY (every intrinsic below): AVX-512F is enabled; loads and stores are masked to
+        // `t − v` lanes of rows of length t that lie inside the sample's slices (checked by the
+        // slicing) or inside the TILE-long stack buffers.
+        let zero = _mm512_setzero_ps();
+        for smp in 0..n {
+            let xs = &x[smp * c * hw..][..c * hw];
+            let dys = &dy[smp * c * hw..][..c * hw];
+            let dxs = &mut dx[smp * c * hw..][..c * hw];
+            let ss = &stats[smp * hw * 2..][..hw * 2];
+            for p0 in (0..hw).step_by(TILE) {
+                let t = TILE.min(hw - p0);
+                for (i, st) in ss[2 * p0..][..2 * t].chunks_exact(2).enumerate() {
+                    mean[i] = st[0];
+                    rstd[i] = st[1];
+                }
+                s1[..t].fill(0.0);
+                s2[..t].fill(0.0);
+                let lanes = |v: usize| -> __mmask16 { ((1u32 << (t - v).min(16)) - 1) as __mmask16 };
+                // dy at lane group v of a row; fused with ReLU, zero where the forward's output
+                // (x − μ)·(r·γ) + β (its exact operations, no FMA) was not positive.
+                let grad = |dr: *const f32, centred: __m512, v: usize, m: __mmask16, g: __m512, b: __m512| unsafe {
+                    let d = _mm512_maskz_loadu_ps(m, dr.add(v));
+                    if RELU {
+                        let scale = _mm512_mul_ps(_mm512_loadu_ps(rstd.as_ptr().add(v)), g);
+                        let y = _mm512_add_ps(_mm512_mul_ps(centred, scale), b);
+                        _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(y, zero), d)
+                    } else {
+                        d
+                    }
+                };
+                for ch in 0..c {
+                    let (xr, dr) = (xs[ch * hw + p0..][..t].as_ptr(), dys[ch * hw + p0..][..t].as_ptr());
+                    let (g, b) =
+                        (_mm512_set1_ps(gamma[ch]), _mm512_set1_ps(if RELU { beta[ch] } else { 0.0 }));
+                    let (mut dg, mut db) = (zero, zero);
+                    for v in (0..t).step_by(16) {
+                        let m = lanes(v);
+                        unsafe {
+                            let centred = _mm512_sub_ps(
+                                _mm512_maskz_loadu_ps(m, xr.add(v)),
+                                _mm512_loadu_ps(mean.as_ptr().add(v)),
+                            );
+                            let d = grad(dr, centred, v, m, g, b);
+                            let xh = _mm512_mul_ps(centred, _mm512_loadu_ps(rstd.as_ptr().add(v)));
+                            let e = _mm512_mul_ps(d, g);
+                            let a = _mm512_add_ps(_mm512_loadu_ps(s1.as_ptr().add(v)), e);
+                            let b = _mm512_fmadd_ps(e, xh, _mm512_loadu_ps(s2.as_ptr().add(v)));
+                            _mm512_storeu_ps(s1.as_mut_ptr().add(v), a);
+                            _mm512_storeu_ps(s2.as_mut_ptr().add(v), b);
+                            dg = _mm512_fmadd_ps(d, xh, dg);
+                            db = _mm512_add_ps(d, db);
+                        }
+                    }
+                    dgamma[ch] += _mm512_reduce_add_ps(dg);
+                    dbeta[ch] += _mm512_reduce_add_ps(db);
+                }
+                // Fold per-pixel constants: s1 → mean_c(e), s2 → r·mean_c(e·x̂).
+                for i in 0..t {
+                    s1[i] *= inv_c;
+                    s2[i] *= rstd[i] * inv_c;
+                }
+                for ch in 0..c {
+                    let (xr, dr) = (xs[ch * hw + p0..][..t].as_ptr(), dys[ch * hw + p0..][..t].as_ptr());
+                    let out = dxs[ch * hw + p0..][..t].as_mut_ptr();
+                    let (g, b) =
+                        (_mm512_set1_ps(gamma[ch]), _mm512_set1_ps(if RELU { beta[ch] } else { 0.0 }));
+                    for v in (0..t).step_by(16) {
+                        let m = lanes(v);
+                        unsafe {
+                            let centred = _mm512_sub_ps(
+                                _mm512_maskz_loadu_ps(m, xr.add(v)),
+                                _mm512_loadu_ps(mean.as_ptr().add(v)),
+                            );
+                            let d = grad(dr, centred, v, m, g, b);
+                            // r·(g·d − a − (x − μ)·b)
+                            let inner = _mm512_fnmadd_ps(
+                                centred,
+                                _mm512_loadu_ps(s2.as_ptr().add(v)),
+                                _mm512_fmsub_ps(g, d, _mm512_loadu_ps(s1.as_ptr().add(v))),
+                            );
+                            let o = _mm512_fmadd_ps(
+                                _mm512_loadu_ps(rstd.as_ptr().add(v)),
+                                inner,
+                                _mm512_maskz_loadu_ps(m, out.add(v)),
+                            );
+                            _mm512_mask_storeu_ps(out.add(v), m, o);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// With `RELU`, dy is masked where the forward's output was not positive; else `beta` is unused.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn backward_impl<const RELU: bool>(
+        &self,
+        gamma: &[f32],
+        beta: &[f32],
+        x: &[f32],
+        stats: &[f32],
+        dy: &[f32],
+        n: usize,
+        hw: usize,
+        dgamma: &mut [f32],
+        dbeta: &mut [f32],
+        dx: &mut [f32],
+    ) {
+        let c = self.channels;
         let inv_c = 1.0 / c as f32;
         let mut mean_buf = [0.0f32; TILE];
         let mut rstd_buf = [0.0f32; TILE];
@@ -175,7 +361,8 @@ impl LayerNorm {
                 for ch in 0..c {
                     let xr = &xs[ch * hw + p0..][..t];
                     let dr = &dys[ch * hw + p0..][..t];
-                    let (dg, db) = accumulate_row(gamma[ch], xr, dr, mean, rstd, s1, s2);
+                    let gb = (gamma[ch], if RELU { beta[ch] } else { 0.0 });
+                    let (dg, db) = accumulate_row::<RELU>(gb, xr, dr, mean, rstd, s1, s2);
                     dgamma[ch] += dg;
                     dbeta[ch] += db;
                 }
@@ -185,13 +372,14 @@ impl LayerNorm {
                     *b *= r * inv_c;
                 }
                 for ch in 0..c {
-                    let g = gamma[ch];
+                    let (g, bt) = (gamma[ch], if RELU { beta[ch] } else { 0.0 });
                     let xr = &xs[ch * hw + p0..][..t];
                     let dr = &dys[ch * hw + p0..][..t];
                     let out = &mut dxs[ch * hw + p0..][..t];
                     let per_pixel = mean.iter().zip(rstd.iter()).zip(s1.iter().zip(s2.iter()));
                     for (((o, &v), &d), ((&m, &r), (&a, &b))) in out.iter_mut().zip(xr).zip(dr).zip(per_pixel)
                     {
+                        let d = masked::<RELU>(d, v, m, r, (g, bt));
                         *o += r * (g * d - a - (v - m) * b);
                     }
                 }
@@ -200,11 +388,19 @@ impl LayerNorm {
     }
 }
 
+/// dy, or (`RELU`) dy where the forward's output (x − μ)·(r·γ) + β (the same operations, so the
+/// same bits) was positive: a select, so loops stay vectorised.
+#[inline(always)]
+fn masked<const RELU: bool>(dy: f32, x: f32, mean: f32, rstd: f32, (g, b): (f32, f32)) -> f32 {
+    if RELU && (x - mean) * (rstd * g) + b <= 0.0 { 0.0 } else { dy }
+}
+
 /// One channel row of a tile: adds e = dy·γ and e·x̂ into the per-pixel sums `s1`, `s2` and returns
 /// this row's (Σ dy·x̂, Σ dy) for dγ, dβ. Reductions run in LANES independent partial sums.
 #[inline(always)]
-fn accumulate_row(
-    g: f32,
+#[allow(clippy::too_many_arguments)]
+fn accumulate_row<const RELU: bool>(
+    (g, beta): (f32, f32),
     x: &[f32],
     dy: &[f32],
     mean: &[f32],
@@ -223,20 +419,22 @@ fn accumulate_row(
     for (((xc, dc), (mc, rc)), (ac, bc)) in chunks {
         for l in 0..LANES {
             let xh = (xc[l] - mc[l]) * rc[l];
-            let e = dc[l] * g;
+            let d = masked::<RELU>(dc[l], xc[l], mc[l], rc[l], (g, beta));
+            let e = d * g;
             ac[l] += e;
             bc[l] += e * xh;
-            dg[l] += dc[l] * xh;
-            db[l] += dc[l];
+            dg[l] += d * xh;
+            db[l] += d;
         }
     }
     for i in split..x.len() {
         let xh = (x[i] - mean[i]) * rstd[i];
-        let e = dy[i] * g;
+        let d = masked::<RELU>(dy[i], x[i], mean[i], rstd[i], (g, beta));
+        let e = d * g;
         s1[i] += e;
         s2[i] += e * xh;
-        dg[0] += dy[i] * xh;
-        db[0] += dy[i];
+        dg[0] += d * xh;
+        db[0] += d;
     }
     (dg.iter().sum(), db.iter().sum())
 }
@@ -307,6 +505,53 @@ mod tests {
             assert_close(&dx, &twice(&want_dx), 1e-4, "dx accumulated");
             assert_close(&dgamma, &twice(&want_dg), 1e-4, "dgamma accumulated");
             assert_close(&dbeta, &twice(&want_db), 1e-4, "dbeta accumulated");
+        }
+    }
+
+    /// backward_relu against finite differences of relu(naive) on a small case, and against
+    /// `backward` of the masked gradient over two tiles.
+    #[test]
+    fn layer_norm_relu_matches_finite_differences() {
+        let ln = LayerNorm { channels: 6, eps: 1e-3 };
+        let c = ln.channels;
+        for (n, hw) in [(2, 7), (2, TILE + 21)] {
+            let x: Vec<f32> = test_values(n * c * hw, 11).iter().map(|v| v - 1.0).collect();
+            let gamma: Vec<f32> = test_values(c, 12).iter().map(|v| 1.0 + 0.5 * v).collect();
+            let beta = test_values(c, 13);
+            let r = test_values(n * c * hw, 14);
+            let (x64, g64, b64) = (to64(&x), to64(&gamma), to64(&beta));
+
+            let mut y = vec![0.0; x.len()];
+            let mut stats = vec![0.0; n * hw * 2];
+            ln.forward(&gamma, &beta, &x, n, hw, &mut y, &mut stats);
+            let fd_valid = y.iter().all(|v| v.abs() > 1e-3);
+            y.iter_mut().for_each(|v| *v = v.max(0.0));
+            let (mut dx, mut dg, mut db) = (vec![0.0; x.len()], vec![0.0; c], vec![0.0; c]);
+            ln.backward_relu(&gamma, &beta, &x, &stats, &r, n, hw, &mut dg, &mut db, &mut dx);
+
+            let masked: Vec<f32> = r.iter().zip(&y).map(|(&g, &v)| if v > 0.0 { g } else { 0.0 }).collect();
+            let (mut dx2, mut dg2, mut db2) = (vec![0.0; x.len()], vec![0.0; c], vec![0.0; c]);
+            ln.backward(&gamma, &x, &stats, &masked, n, hw, &mut dg2, &mut db2, &mut dx2);
+            assert_close(&dx, &to64(&dx2), 1e-5, "dx vs masked backward");
+            assert_close(&dg, &to64(&dg2), 1e-5, "dgamma vs masked backward");
+            assert_close(&db, &to64(&db2), 1e-5, "dbeta vs masked backward");
+            // The portable loops (CPUs without AVX-512) agree with the dispatched kernel.
+            let (mut dx3, mut dg3, mut db3) = (vec![0.0; x.len()], vec![0.0; c], vec![0.0; c]);
+            ln.backward_impl::<true>(&gamma, &beta, &x, &stats, &r, n, hw, &mut dg3, &mut db3, &mut dx3);
+            assert_close(&dx3, &to64(&dx), 1e-5, "portable dx");
+            assert_close(&dg3, &to64(&dg), 1e-5, "portable dgamma");
+            assert_close(&db3, &to64(&db), 1e-5, "portable dbeta");
+            if hw > TILE {
+                continue;
+            }
+            // Finite differences need every output away from ReLU's kink (else pick another seed).
+            assert!(fd_valid, "an output sits on the kink");
+            let relu = |v: Vec<f64>| v.into_iter().map(|a| a.max(0.0)).collect::<Vec<_>>();
+            let loss = |g: &[f64], b: &[f64], x: &[f64]| dot(&relu(naive(&ln, g, b, x, n, hw)), &r);
+            let h = 1e-5;
+            assert_close(&dx, &numerical_grad(&x64, h, |x| loss(&g64, &b64, x)), 1e-4, "dx");
+            assert_close(&dg, &numerical_grad(&g64, h, |g| loss(g, &b64, &x64)), 1e-4, "dgamma");
+            assert_close(&db, &numerical_grad(&b64, h, |b| loss(&g64, b, &x64)), 1e-4, "dbeta");
         }
     }
 }

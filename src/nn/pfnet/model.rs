@@ -113,6 +113,16 @@ impl PfNet {
         loglik.copy_from_slice(&ws.joint.loglik[..n]);
     }
 
+    /// One filter step's log-likelihoods for `k` particles sharing one observation (no gradient).
+    pub fn step_log_likelihoods(&self, obs: &[f32], maps: &[f32], k: usize, ws: &mut Workspace) -> Vec<f32> {
+        let p = &self.params;
+        self.obs.forward(p, obs, 1, &mut ws.obs);
+        self.map.forward(p, maps, k, &mut ws.map);
+        self.fill_joint_input(&ws.map.features, &ws.obs.features, k, |_| 0, &mut ws.joint);
+        self.joint.forward(p, k, &mut ws.joint);
+        ws.joint.loglik[..k].to_vec()
+    }
+
     /// One filter step's share of a training batch: the observation, its `k` particles' local
     /// maps, forward to the log-likelihoods, `loss` turns them into (loss, d loss / d loglik),
     /// then backward, accumulating every weight gradient into `grads` (laid out like `params`).

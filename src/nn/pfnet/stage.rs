@@ -2,7 +2,7 @@
 //! channels, and LayerNorm followed by ReLU.
 
 use super::config::ConvBranch;
-use crate::nn::activation::{relu_backward, relu_forward};
+use crate::nn::activation::relu_forward;
 use crate::nn::conv::{Conv2d, Padding};
 use crate::nn::layer_norm::LayerNorm;
 use crate::nn::params::{ParamId, Params};
@@ -110,26 +110,24 @@ impl NormRelu {
         relu_forward(y);
     }
 
-    /// From the gradient at the ReLU's output `dy` to the gradient at the norm's input, accumulated
-    /// into `dx`; `scratch` holds the gradient between the two.
+    /// From the gradient at the ReLU's output `dy` to the gradient at the norm's input `x`,
+    /// accumulated into `dx`; the ReLU's mask is recomputed, so the output need not be kept
+    /// (one fused pass, see `LayerNorm::backward_relu`).
     #[allow(clippy::too_many_arguments)] // the layer contract: inputs, output grad, param grads, input grad
     pub fn backward(
         &self,
         p: &Params,
         x: &[f32],
-        y: &[f32],
         stats: &[f32],
         dy: &[f32],
         n: usize,
         hw: usize,
         grads: &mut [f32],
         dx: &mut [f32],
-        scratch: &mut Vec<f32>,
     ) {
-        zeroed(scratch, dy.len());
-        relu_backward(y, dy, scratch);
+        let (gamma, beta) = (p.get(self.gamma), p.get(self.beta));
         let (dgamma, dbeta) = p.pair_mut(grads, self.gamma, self.beta);
-        self.norm.backward(p.get(self.gamma), x, stats, scratch, n, hw, dgamma, dbeta, dx);
+        self.norm.backward_relu(gamma, beta, x, stats, dy, n, hw, dgamma, dbeta, dx);
     }
 }
 

@@ -1,20 +1,25 @@
-//! One apartment from one seed: floor plan, then furniture, drawn onto an occupancy grid.
+//! One apartment from one seed: floor plan, then furniture, drawn onto an occupancy grid, then
+//! roughened to look like a SLAM map.
 
 use super::furniture::{Piece, furnish};
 use super::params::{ApartmentParams, CellParams};
+use super::realism::roughen;
 use super::rect::CellRect;
 use super::rooms::{FloorPlan, plan};
 use crate::world::map::{Cell, OccupancyMap};
 use crate::world::rng::stream;
 
-/// Stream keys of the two stages, so furniture draws never shift the floor plan.
+/// Stream keys of the two stages, so furniture draws never shift the floor plan (the realism
+/// layer has its own).
 const STAGE_PLAN: u64 = 0x706c_616e;
 const STAGE_FURNITURE: u64 = 0x6675_726e;
 /// Floor plans tried before falling back to a single room (in practice one or two suffice).
 const MAX_ATTEMPTS: u64 = 64;
 
 /// The apartment of `seed`: outside Unknown, walls Occupied, floor Free; origin (0, 0), the
-/// apartment inset by `margin_m`. The same seed and params always give the same map.
+/// apartment inset by `margin_m`. The same seed and params always give the same map. With
+/// `params.realism` on (the default) walls are uneven and furniture is drawn as a scanner sees
+/// it, parts of it unknown; off, the map is the clean plan as before the layer existed.
 pub fn generate_apartment(seed: u64, params: &ApartmentParams) -> OccupancyMap {
     let p = CellParams::new(params);
     let floor_plan = (0..MAX_ATTEMPTS)
@@ -22,7 +27,8 @@ pub fn generate_apartment(seed: u64, params: &ApartmentParams) -> OccupancyMap {
         .or_else(|| plan(&p, &mut stream(&[seed, STAGE_PLAN, MAX_ATTEMPTS]), true))
         .expect("a single-room plan needs no doors and always succeeds");
     let pieces = furnish(&floor_plan, &p, &mut stream(&[seed, STAGE_FURNITURE]));
-    draw(&floor_plan, &pieces, &p)
+    let clean = draw(&floor_plan, &pieces, &p);
+    roughen(clean, &floor_plan, &pieces, &p, &params.realism, seed)
 }
 
 fn draw(plan: &FloorPlan, pieces: &[Piece], p: &CellParams) -> OccupancyMap {
@@ -81,7 +87,8 @@ fn disc(map: &mut OccupancyMap, r: &CellRect) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::map::procedural::{SEEN_SEEDS, UNSEEN_SEEDS};
+    use crate::world::map::TraversableMap;
+    use crate::world::map::procedural::{RealismParams, SEEN_SEEDS, UNSEEN_SEEDS};
     use crate::world::robot::RobotParams;
     use std::collections::VecDeque;
 
@@ -289,6 +296,140 @@ mod tests {
     fn floor_plans_never_need_the_single_room_fallback() {
         let c = CellParams::new(&ApartmentParams::default());
         for seed in seeds(200) {
+            let first = (0..MAX_ATTEMPTS)
+                .position(|a| plan(&c, &mut stream(&[seed, STAGE_PLAN, a]), false).is_some());
+            assert!(first.is_some_and(|a| a < 8), "seed {seed}: floor plan needed attempt {first:?}");
+        }
+    }
+
+    /// The floor plan `generate_apartment` draws for `seed`.
+    fn plan_of(seed: u64, params: &ApartmentParams) -> FloorPlan {
+        let c = CellParams::new(params);
+        (0..MAX_ATTEMPTS)
+            .find_map(|attempt| plan(&c, &mut stream(&[seed, STAGE_PLAN, attempt]), false))
+            .expect("a plan within the attempts")
+    }
+
+    /// FNV-1a over the cells, bottom row first (free 0, occupied 1, unknown 2).
+    fn fingerprint(map: &OccupancyMap) -> u64 {
+        map.cells.iter().fold(0xcbf2_9ce4_8422_2325, |h, &c| (h ^ c as u64).wrapping_mul(0x100_0000_01b3))
+    }
+
+    #[test]
+    fn realism_off_reproduces_the_maps_made_before_the_layer() {
+        let off = ApartmentParams {
+            realism: RealismParams { enabled: false, ..Default::default() },
+            ..Default::default()
+        };
+        // Fingerprints of `apfn map export --procedural SEED` from a build before the layer existed.
+        for (seed, before) in
+            [(0, 0x649f_4a75_ec32_2e06), (17, 0xc100_fee6_0a1b_8c61), (1_000_000, 0x2938_cc50_9e20_ceaa)]
+        {
+            assert_eq!(
+                fingerprint(&generate_apartment(seed, &off)),
+                before,
+                "seed {seed} changed with realism off"
+            );
+        }
+        let zero_rates = ApartmentParams { realism: RealismParams::none(), ..Default::default() };
+        for seed in seeds(6) {
+            assert_eq!(generate_apartment(seed, &zero_rates), generate_apartment(seed, &off), "seed {seed}");
+        }
+    }
+
+    #[test]
+    fn realism_is_reproducible_and_changes_the_map() {
+        let realistic = ApartmentParams { realism: RealismParams::default(), ..ApartmentParams::default() };
+        for params in [realistic, ApartmentParams::paper_size()] {
+            let clean = ApartmentParams {
+                realism: RealismParams { enabled: false, ..Default::default() },
+                ..params.clone()
+            };
+            for seed in [3, 1_000_003] {
+                let map = generate_apartment(seed, &params);
+                assert_eq!(fingerprint(&map), fingerprint(&generate_apartment(seed, &params)), "seed {seed}");
+                assert_ne!(map, generate_apartment(seed, &clean), "seed {seed}: realism changed nothing");
+            }
+        }
+    }
+
+    #[test]
+    fn outside_the_outer_walls_is_unknown() {
+        for params in [ApartmentParams::default(), ApartmentParams::paper_size()] {
+            let c = CellParams::new(&params);
+            for seed in seeds(10) {
+                let map = generate_apartment(seed, &params);
+                let walled: Vec<CellRect> = plan_of(seed, &params)
+                    .rooms
+                    .iter()
+                    .map(|room| room.rect)
+                    .map(|r| {
+                        CellRect::new(r.x0 - c.wall_lo, r.y0 - c.wall_lo, r.x1 + c.wall_hi, r.y1 + c.wall_hi)
+                    })
+                    .collect();
+                for j in 0..map.height as i32 {
+                    for i in 0..map.width as i32 {
+                        let inside = walled.iter().any(|r| r.contains(&CellRect::new(i, j, i + 1, j + 1)));
+                        assert!(
+                            inside || map.get(i as usize, j as usize) == Cell::Unknown,
+                            "seed {seed}: cell ({i}, {j}) outside the walls is {:?}",
+                            map.get(i as usize, j as usize)
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn traversable_space_is_one_component_of_sane_area_in_both_presets() {
+        let radius = RobotParams::default().radius_m;
+        for params in [ApartmentParams::default(), ApartmentParams::paper_size()] {
+            let c = CellParams::new(&params);
+            for seed in seeds(20) {
+                let map = generate_apartment(seed, &params);
+                let sizes = components(&eroded(&map, radius), map.width);
+                let total: usize = sizes.iter().sum();
+                assert!(
+                    sizes[0] as f32 >= 0.9 * total as f32,
+                    "seed {seed}: largest region holds {} of {total} cells the robot fits in",
+                    sizes[0]
+                );
+                let floor: i64 = plan_of(seed, &params)
+                    .rooms
+                    .iter()
+                    .map(|r| r.rect.inset(c.wall_hi, c.wall_lo).area())
+                    .sum();
+                let trav = TraversableMap::build(&map, radius).expect("room for the robot");
+                let share = trav.cells.len() as f32 / floor as f32;
+                assert!(
+                    (0.3..=0.95).contains(&share),
+                    "seed {seed}: traversable share {share:.2} of the floor"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn paper_size_keeps_the_traversable_bounding_box_within_10_m() {
+        let p = ApartmentParams::paper_size();
+        assert_eq!(p.validate(), Ok(()));
+        let radius = RobotParams::default().radius_m;
+        for seed in seeds(30) {
+            let map = generate_apartment(seed, &p);
+            let ((w, h), _) = footprint(&map);
+            assert!(w >= p.min_side_m - 1e-3 && w.max(h) <= 10.1 + 1e-3, "seed {seed}: {w} × {h} m");
+            let trav = TraversableMap::build(&map, radius).expect("room for the robot");
+            let span = |axis: fn(&(u32, u32)) -> u32| {
+                let (lo, hi) =
+                    trav.cells.iter().map(axis).fold((u32::MAX, 0), |(a, b), v| (a.min(v), b.max(v)));
+                (hi + 1 - lo) as f32 * p.resolution_m
+            };
+            let (tw, th) = (span(|c| c.0), span(|c| c.1));
+            assert!(tw <= 10.0 && th <= 10.0, "seed {seed}: traversable box {tw} × {th} m");
+        }
+        let c = CellParams::new(&p);
+        for seed in seeds(100) {
             let first = (0..MAX_ATTEMPTS)
                 .position(|a| plan(&c, &mut stream(&[seed, STAGE_PLAN, a]), false).is_some());
             assert!(first.is_some_and(|a| a < 8), "seed {seed}: floor plan needed attempt {first:?}");

@@ -13,10 +13,12 @@ use rand::Rng;
 pub(super) struct Piece {
     pub rect: CellRect,
     pub round: bool,
+    /// What it is, so the realism layer can draw it as a scanner sees it.
+    pub kind: Kind,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Kind {
+pub(super) enum Kind {
     Bed,
     Sofa,
     Shelf,
@@ -124,7 +126,7 @@ fn place(
                     2 => CellRect::new(inner.x0 + pos, inner.y0, inner.x0 + pos + a, inner.y0 + d),
                     _ => CellRect::new(inner.x0 + pos, inner.y1 - d, inner.x0 + pos + a, inner.y1),
                 };
-                Piece { rect, round: false }
+                Piece { rect, round: false, kind }
             }
             Footing::Free { sides, square } => {
                 let w = p.cells(rng.random_range(sides.0..=sides.1)).max(1);
@@ -134,7 +136,11 @@ fn place(
                 }
                 let x0 = rng.random_range(inner.x0 + c..=inner.x1 - c - w);
                 let y0 = rng.random_range(inner.y0 + c..=inner.y1 - c - h);
-                Piece { rect: CellRect::new(x0, y0, x0 + w, y0 + h), round: square && rng.random_bool(0.5) }
+                Piece {
+                    rect: CellRect::new(x0, y0, x0 + w, y0 + h),
+                    round: square && rng.random_bool(0.5),
+                    kind,
+                }
             }
         };
         if fits(&candidate.rect, inner, placed, keep, c) {
@@ -171,7 +177,7 @@ mod tests {
             !fits(&CellRect::new(0, 20, 60, 30), inner, &[], &[], c),
             "touching opposite walls cuts the room"
         );
-        let sofa = Piece { rect: CellRect::new(30, 0, 50, 10), round: false };
+        let sofa = Piece { rect: CellRect::new(30, 0, 50, 10), round: false, kind: Kind::Sofa };
         assert!(!fits(&CellRect::new(20, 20, 30, 30), inner, &[sofa], &[], c), "gap 10 < 12 to the sofa");
         assert!(fits(&CellRect::new(15, 22, 25, 32), inner, &[sofa], &[], c), "gap ≥ 12 to the sofa");
         let door_zone = CellRect::new(-2, 40, 20, 60);

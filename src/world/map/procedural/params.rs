@@ -82,6 +82,10 @@ pub struct ApartmentParams {
     pub pillar_probability: f64,
     /// Band of unknown cells around the apartment, metres (issue spec: 0.5 m).
     pub margin_m: f32,
+    /// How the clean plan is roughened to look like a SLAM map. Off in [`Default`], so the
+    /// committed MCL tables reproduce (`realism: ()` in a scene file turns it on with its own
+    /// defaults); on in [`ApartmentParams::paper_size`], which PF-net trains on.
+    pub realism: RealismParams,
 }
 
 impl Default for ApartmentParams {
@@ -107,7 +111,149 @@ impl Default for ApartmentParams {
             furniture_clearance_m: 0.6,
             pillar_probability: 0.3,
             margin_m: 0.5,
+            realism: RealismParams::none(),
         }
+    }
+}
+
+/// How a clean apartment is roughened to look like a 0.05 m SLAM map of a furnished flat
+/// (`aws_small_house`, `aws_bookstore`): walls of uneven thickness with small gaps, furniture
+/// seen as outlines, legs and edges, round and slanted tables, clutter. A rate or probability
+/// of 0 switches its feature off; all of them 0, or `enabled: false`, leaves the map unchanged.
+/// Nothing here may cut the robot's free space in two: see the realism module.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct RealismParams {
+    /// Whether the layer runs at all (our choice: true, so that a learned model trained on
+    /// procedural maps sees SLAM-like maps; false reproduces maps made before the layer).
+    pub enabled: bool,
+    /// Share of wall runs (0.3–1.5 m stretches along a wall face) drawn thinner (60 %) or
+    /// thicker (40 %) than nominal (our choice: 0.4; SLAM walls in the AWS maps are mostly one or
+    /// two cells thick, in places up to four).
+    pub wall_jitter_probability: f64,
+    /// Most extra thickness a thicker wall run grows into its room, metres (our choice:
+    /// 0.1 m = 2 cells, the spread seen in the AWS maps; at most 0.3 m).
+    pub wall_thicken_max_m: f32,
+    /// Chance, per cell of wall face, of a one-cell bump into the room or notch into the wall
+    /// (our choice: 0.04, a few per metre, like SLAM's ragged wall edges).
+    pub wall_noise_probability: f64,
+    /// Small gaps cut through walls per metre of wall face, 1/m (our choice: 0.1; an interior
+    /// wall has two faces; SLAM walls show a few unobserved cells every few metres).
+    pub wall_gaps_per_m: f32,
+    /// Narrowest wall gap, metres (our choice: 0.05 m = one cell).
+    pub wall_gap_min_m: f32,
+    /// Widest wall gap, metres (our choice: 0.15 m; at most 0.3 m so it stays narrower than the
+    /// robot's 0.36 m diameter and never becomes a passage).
+    pub wall_gap_max_m: f32,
+    /// Chance that a solid piece (shelf, counter, pillar, and beds, sofas, tables drawn neither
+    /// as edges nor legs) is a one-cell outline with an unknown interior rather than a black block
+    /// (our choice: 0.9; the AWS maps show furniture as black outlines around unknown space,
+    /// hardly ever as solid blocks).
+    pub outline_probability: f64,
+    /// Chance that a bed or sofa shows only as one-cell lines on 1–3 of its room-facing sides,
+    /// the floor beneath free (our choice: 0.5; a low LiDAR sees a sofa's back or a bed's edge).
+    pub partial_outline_probability: f64,
+    /// Chance that a table or desk shows only its legs, 2–4-cell dots at its corners (our choice:
+    /// 0.6; the AWS bookstore's tables and chairs are dots).
+    pub legs_probability: f64,
+    /// Chance, per side of a square-cornered table shown by its legs, of chairs along that side,
+    /// each as four leg dots (our choice: 0.6).
+    pub chair_probability: f64,
+    /// Chance that a table is round, a disc outline with an unknown interior (our choice: 0.25).
+    pub round_table_probability: f64,
+    /// Chance that a free-standing table stands slanted, rotated 10°–45° within its footprint
+    /// (our choice: 0.3).
+    pub slant_probability: f64,
+    /// Small clutter blobs per m² of floor, 1/m² (our choice: 0.08, a few per room: bins,
+    /// plant pots, bags; half against a wall, half free-standing).
+    pub clutter_per_m2: f32,
+    /// Largest clutter blob side, metres (our choice: 0.15 m = 3 cells; at most 0.5 m).
+    pub clutter_max_m: f32,
+}
+
+impl Default for RealismParams {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            wall_jitter_probability: 0.4,
+            wall_thicken_max_m: 0.1,
+            wall_noise_probability: 0.04,
+            wall_gaps_per_m: 0.1,
+            wall_gap_min_m: 0.05,
+            wall_gap_max_m: 0.15,
+            outline_probability: 0.9,
+            partial_outline_probability: 0.5,
+            legs_probability: 0.6,
+            chair_probability: 0.6,
+            round_table_probability: 0.25,
+            slant_probability: 0.3,
+            clutter_per_m2: 0.08,
+            clutter_max_m: 0.15,
+        }
+    }
+}
+
+impl RealismParams {
+    /// Every feature off: the same maps as `enabled: false`, through the layer's code path.
+    pub fn none() -> Self {
+        Self {
+            enabled: true,
+            wall_jitter_probability: 0.0,
+            wall_noise_probability: 0.0,
+            wall_gaps_per_m: 0.0,
+            outline_probability: 0.0,
+            partial_outline_probability: 0.0,
+            legs_probability: 0.0,
+            chair_probability: 0.0,
+            round_table_probability: 0.0,
+            slant_probability: 0.0,
+            clutter_per_m2: 0.0,
+            ..Self::default()
+        }
+    }
+
+    /// Checks every field against the range the layer supports.
+    pub fn validate(&self) -> Result<(), ApartmentParamsError> {
+        let bad = |field, expected, got: String| Err(ApartmentParamsError { field, expected, got });
+        let r = self;
+        let in_range = |x: f32, lo: f32, hi: f32| x.is_finite() && (lo..=hi).contains(&x);
+        for (field, p) in [
+            ("realism.wall_jitter_probability", r.wall_jitter_probability),
+            ("realism.wall_noise_probability", r.wall_noise_probability),
+            ("realism.outline_probability", r.outline_probability),
+            ("realism.partial_outline_probability", r.partial_outline_probability),
+            ("realism.legs_probability", r.legs_probability),
+            ("realism.chair_probability", r.chair_probability),
+            ("realism.round_table_probability", r.round_table_probability),
+            ("realism.slant_probability", r.slant_probability),
+        ] {
+            if !(0.0..=1.0).contains(&p) {
+                return bad(field, "in [0, 1]", p.to_string());
+            }
+        }
+        if !in_range(r.wall_thicken_max_m, 0.0, 0.3) {
+            return bad("realism.wall_thicken_max_m", "in [0, 0.3] m", r.wall_thicken_max_m.to_string());
+        }
+        if !in_range(r.wall_gaps_per_m, 0.0, 10.0) {
+            return bad("realism.wall_gaps_per_m", "in [0, 10] /m", r.wall_gaps_per_m.to_string());
+        }
+        if !in_range(r.wall_gap_min_m, 0.0, r.wall_gap_max_m) {
+            return bad("realism.wall_gap_min_m", "in [0, wall_gap_max_m] m", r.wall_gap_min_m.to_string());
+        }
+        if !in_range(r.wall_gap_max_m, r.wall_gap_min_m, 0.3) {
+            return bad(
+                "realism.wall_gap_max_m",
+                "in [wall_gap_min_m, 0.3] m (narrower than the robot)",
+                r.wall_gap_max_m.to_string(),
+            );
+        }
+        if !in_range(r.clutter_per_m2, 0.0, 10.0) {
+            return bad("realism.clutter_per_m2", "in [0, 10] /m²", r.clutter_per_m2.to_string());
+        }
+        if !in_range(r.clutter_max_m, 0.0, 0.5) {
+            return bad("realism.clutter_max_m", "in [0, 0.5] m", r.clutter_max_m.to_string());
+        }
+        Ok(())
     }
 }
 
@@ -185,7 +331,23 @@ impl ApartmentParams {
         if !in_range(d.margin_m, 0.0, 100.0) {
             return bad("margin_m", "in [0, 100] m", d.margin_m.to_string());
         }
-        Ok(())
+        d.realism.validate()
+    }
+
+    /// The paper's size range: the authors kept Gibson scenes whose traversable bounding box is
+    /// at most 10 m, so outlines of 5–10 m a side with 2–5 rooms of about 15 m² (small flats
+    /// have smaller rooms). The bounding box, walls included, is at most 10.1 m, and the
+    /// traversable one, inside the walls, under 10 m. Scan realism on; everything else as
+    /// [`Default`], which stays at 6–20 m and clean so that committed results stay reproducible.
+    pub fn paper_size() -> Self {
+        Self {
+            min_side_m: 5.0,
+            max_side_m: 10.0,
+            max_rooms: 5,
+            mean_room_area_m2: 15.0,
+            realism: RealismParams::default(),
+            ..Self::default()
+        }
     }
 }
 

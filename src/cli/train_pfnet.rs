@@ -1,0 +1,157 @@
+//! `apfn train-pfnet --config FILE.ron --out DIR [--resume]`: PF-net's pretraining with a
+//! progress bar, `train_log.csv`, `train_curves.png`, and atomic checkpoints (`last.safetensors` with the optimizer
+//! state for `--resume`, `best.safetensors` with the best validation loss).
+
+use crate::cli::set_threads;
+use crate::compose::read_ron;
+use crate::nn::checkpoint::Checkpoint;
+use crate::nn::pfnet::{GradBuffers, Workspaces};
+use crate::train::curves::loss_curves_png;
+use crate::train::pfnet::{BatchBuffers, TrainPfNetConfig, TrainState, simulate_data, validation_loss};
+use crate::world::map::write_atomically;
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(clap::Args, Clone, Debug, PartialEq)]
+pub struct TrainPfNetArgs {
+    /// Training config (RON, a `TrainPfNetConfig`).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Folder for checkpoints and the log (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Continue from `<out>/last.safetensors` (the config must be the one it was trained with).
+    #[arg(long)]
+    pub resume: bool,
+    /// Worker threads (default: all cores); the same seed and thread count give the same bytes.
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// One line of `train_log.csv`.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct LogRow {
+    pub step: u64,
+    /// Mean training loss over the steps since the previous row.
+    pub train_loss: f64,
+    pub val_loss: f64,
+    /// Wall-clock seconds of this process when the row was written.
+    pub wall_s: f64,
+}
+
+pub fn run(args: TrainPfNetArgs) -> anyhow::Result<()> {
+    set_threads(args.threads)?;
+    let config: TrainPfNetConfig = read_ron(&args.config)?;
+    config.check().map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let (last, best, log_path) = (
+        args.out.join("last.safetensors"),
+        args.out.join("best.safetensors"),
+        args.out.join("train_log.csv"),
+    );
+
+    let mut state = if args.resume {
+        let file = Checkpoint::load(&last)?;
+        let saved = file.metadata.get("train_config").map(String::as_str).unwrap_or_default();
+        anyhow::ensure!(
+            ron::from_str::<TrainPfNetConfig>(saved).ok().as_ref() == Some(&config),
+            "--resume: {} was trained with another config than {}",
+            last.display(),
+            args.config.display()
+        );
+        TrainState::from_checkpoint(&file, &config)?
+    } else {
+        TrainState::new(&config)?
+    };
+    let mut rows: Vec<LogRow> = if args.resume { read_log(&log_path)? } else { vec![] };
+    rows.retain(|r| r.step <= state.step);
+
+    let started = Instant::now();
+    let sim_bar = ProgressBar::new_spinner();
+    let [train, val] = simulate_data(&config, |name, done| {
+        sim_bar.set_message(format!("simulating {name} episodes: {done}"))
+    })?;
+    sim_bar.finish_and_clear();
+    println!(
+        "{} training episodes on {} seen apartments, {} validation episodes on {} unseen, simulated in {:.1} s",
+        train.episodes.len(),
+        train.maps.len(),
+        val.episodes.len(),
+        val.maps.len(),
+        started.elapsed().as_secs_f64()
+    );
+
+    let pool = Workspaces::for_current_pool();
+    let (mut buffers, mut grads) = (BatchBuffers::default(), GradBuffers::default());
+    let bar = ProgressBar::new(config.train_steps).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} steps, loss {msg}, eta {eta}")
+            .expect("static template"),
+    );
+    bar.set_position(state.step);
+    let mut since_log = (0.0, 0u64);
+    while state.step < config.train_steps {
+        let loss = state.train_step(&config, &train, &mut buffers, &mut grads, &pool);
+        anyhow::ensure!(loss.is_finite(), "training diverged at step {}: loss {loss}", state.step);
+        since_log = (since_log.0 + loss, since_log.1 + 1);
+        bar.set_position(state.step);
+        bar.set_message(format!("{:.4}", since_log.0 / since_log.1 as f64));
+        if state.step % config.eval_every == 0 || state.step == config.train_steps {
+            let val_loss = validation_loss(&config, &state.model, &val, &mut buffers, &pool);
+            let train_loss = since_log.0 / since_log.1 as f64;
+            rows.push(LogRow {
+                step: state.step,
+                train_loss,
+                val_loss,
+                wall_s: started.elapsed().as_secs_f64(),
+            });
+            since_log = (0.0, 0);
+            if val_loss < state.best_val_loss {
+                state.best_val_loss = val_loss;
+                state.model.save(&best)?;
+            }
+            state.to_checkpoint(&config).save(&last)?;
+            write_log(&log_path, &rows)?;
+            let points: Vec<_> = rows.iter().map(|r| (r.step, r.train_loss, r.val_loss)).collect();
+            let title = format!("PF-net {} pretraining", config.network);
+            write_atomically(&args.out.join("train_curves.png"), &loss_curves_png(&points, &title)?)?;
+            bar.println(format!(
+                "step {}: train loss {train_loss:.4}, validation loss {val_loss:.4}",
+                state.step
+            ));
+        }
+    }
+    bar.finish_and_clear();
+    println!(
+        "trained {} steps in {:.1} s; best validation loss {:.4}; wrote {}, {} and {}",
+        config.train_steps,
+        started.elapsed().as_secs_f64(),
+        state.best_val_loss,
+        best.display(),
+        last.display(),
+        log_path.display()
+    );
+    Ok(())
+}
+
+fn read_log(path: &Path) -> anyhow::Result<Vec<LogRow>> {
+    if !path.exists() {
+        return Ok(vec![]);
+    }
+    let mut reader = csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
+    reader
+        .deserialize()
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("{}: not a training log", path.display()))
+}
+
+fn write_log(path: &Path, rows: &[LogRow]) -> anyhow::Result<()> {
+    let mut writer = csv::Writer::from_writer(vec![]);
+    for row in rows {
+        writer.serialize(row)?;
+    }
+    write_atomically(path, &writer.into_inner()?)?;
+    Ok(())
+}

@@ -1,0 +1,327 @@
+//! `apfn train-pfnet`: PF-net's supervised pretraining as in the paper, one explicit loop:
+//! batch → forward → loss → backward → Adam → log → checkpoint.
+//!
+//! Data: goalnav episodes simulated on seen apartments before training (validation on unseen
+//! ones), deterministic for the seed. Each batch draws B episodes (a fresh permutation every
+//! epoch, across maps and episodes), K particles around a perturbed true pose at the first step,
+//! moved by the odometry after it, with no motion noise and no resampling; the loss is the paper's
+//! Δx² + Δy² + β·Δθ² of the weighted mean, averaged over B and T. Every random draw of step s
+//! comes from a stream keyed by (seed, s), so `--resume` continues exactly.
+
+use crate::compose::{LoadedScene, Pipeline, Scene, standard_registry};
+use crate::nn::adam::{Adam, AdamConfig};
+use crate::nn::checkpoint::Checkpoint;
+use crate::nn::pfnet::{
+    GradBuffers, LocalMapSpec, PfNet, PfNetConfig, PoseLoss, StepBatch, Workspaces, crop_local_maps,
+};
+use crate::particles::map_view;
+use crate::train::episodes::{EpisodeSet, RecordedEpisode, simulate_episodes};
+use crate::world::map::procedural::{ApartmentParams, Split};
+use crate::world::rng::stream;
+use crate::world::{Pose2, wrap_angle};
+use rand::Rng;
+use rand::seq::SliceRandom;
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Everything a training run needs; saved inside every checkpoint.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainPfNetConfig {
+    /// The network: `paper` or `compact`.
+    pub network: String,
+    /// Seen apartments to drive on (training) and unseen ones (validation).
+    pub train_maps: usize,
+    pub val_maps: usize,
+    /// Shape of the apartments (default: the paper's size range, scan realism on).
+    pub apartment: ApartmentParams,
+    /// Episodes simulated for training (paper: 4,000) and validation.
+    pub train_episodes: usize,
+    pub val_episodes: usize,
+    /// Filter steps per sequence (paper: T = 25).
+    pub steps: u32,
+    /// Sequences per batch (paper: 8).
+    pub batch: usize,
+    /// Particles per sequence (paper: 30).
+    pub particles: usize,
+    /// Spread of the initial particles and of the perturbation of their centre (paper: 0.3 m, 30°).
+    pub init_std_m: f32,
+    pub init_std_deg: f32,
+    /// Heading weight β of the loss (paper: 0.36).
+    pub heading_weight: f32,
+    /// Adam (the paper's table: 2.5e-3; the authors' code: 5e-5 constant).
+    pub adam: AdamConfig,
+    /// Gradient steps in all, and how often to validate, log and checkpoint.
+    pub train_steps: u64,
+    pub eval_every: u64,
+    /// Root of every random stream (maps, episodes, batches, particles, initial weights).
+    pub seed: u64,
+    /// The schedule that drives the episodes (relative to the working directory).
+    pub collect_schedule: String,
+}
+
+impl Default for TrainPfNetConfig {
+    fn default() -> Self {
+        Self {
+            network: "compact".into(),
+            train_maps: 40,
+            val_maps: 10,
+            apartment: ApartmentParams::paper_size(),
+            train_episodes: 4000,
+            val_episodes: 64,
+            steps: 25,
+            batch: 8,
+            particles: 30,
+            init_std_m: 0.3,
+            init_std_deg: 30.0,
+            heading_weight: 0.36,
+            adam: AdamConfig { learning_rate: 1e-3, ..AdamConfig::default() },
+            train_steps: 10_000,
+            eval_every: 250,
+            seed: 0,
+            collect_schedule: "systems/collect_pfnet.ron".into(),
+        }
+    }
+}
+
+impl TrainPfNetConfig {
+    /// `Err("field: expected …")` for values no run can use.
+    pub fn check(&self) -> Result<(), String> {
+        let positive = [
+            ("train_maps", self.train_maps),
+            ("val_maps", self.val_maps),
+            ("train_episodes", self.train_episodes),
+            ("val_episodes", self.val_episodes),
+            ("batch", self.batch),
+            ("particles", self.particles),
+        ];
+        for (field, value) in positive {
+            if value == 0 || value > 1_000_000 {
+                return Err(format!("{field}: expected 1 to 1,000,000, found {value}"));
+            }
+        }
+        if !(1..=1000).contains(&self.steps) {
+            return Err(format!("steps: expected 1 to 1,000, found {}", self.steps));
+        }
+        if self.train_steps == 0 || self.eval_every == 0 {
+            return Err("train_steps, eval_every: expected at least 1".into());
+        }
+        if !(self.adam.learning_rate > 0.0 && self.adam.learning_rate.is_finite()) {
+            return Err("adam.learning_rate: expected a positive number".into());
+        }
+        PfNetConfig::named(&self.network)
+            .map(|_| ())
+            .ok_or_else(|| format!("network: expected `paper` or `compact`, found `{}`", self.network))
+    }
+
+    fn loss(&self) -> PoseLoss {
+        let scale = 1.0 / (self.batch * self.steps as usize) as f32;
+        PoseLoss { weights: [1.0, 1.0, self.heading_weight], wrap_heading: true, scale }
+    }
+}
+
+/// Simulates the training and validation episodes.
+pub fn simulate_data(
+    config: &TrainPfNetConfig,
+    progress: impl Fn(&str, usize),
+) -> anyhow::Result<[EpisodeSet; 2]> {
+    let registry = standard_registry();
+    let pipeline = Pipeline::load(Path::new(&config.collect_schedule), &registry)?;
+    let simulate = |split: Split, maps: usize, count: usize, salt: u64| {
+        let mut scene = Scene::apartments(split, split.seeds().start, maps, 4);
+        scene.maps = match scene.maps {
+            crate::compose::MapSource::Procedural { split, first, count, .. } => {
+                crate::compose::MapSource::Procedural {
+                    split,
+                    first,
+                    count,
+                    params: config.apartment.clone(),
+                }
+            }
+            other => other,
+        };
+        scene.seed = config.seed.wrapping_add(salt);
+        scene.episode.steps = config.steps;
+        let loaded: LoadedScene = scene.into_loaded(Path::new("train-pfnet"))?;
+        let name = if split == Split::Seen { "training" } else { "validation" };
+        simulate_episodes(&loaded, pipeline.clone(), count, |done| progress(name, done))
+    };
+    Ok([
+        simulate(Split::Seen, config.train_maps, config.train_episodes, 0)?,
+        simulate(Split::Unseen, config.val_maps, config.val_episodes, 1)?,
+    ])
+}
+
+/// A batch's tensors, rebuilt every step into the same buffers.
+#[derive(Default)]
+pub struct BatchBuffers {
+    obs: Vec<f32>,
+    maps: Vec<f32>,
+    states: Vec<[f32; 3]>,
+    targets: Vec<[f32; 3]>,
+}
+
+impl BatchBuffers {
+    /// Fills the buffers for `episodes` of `data`, particles drawn from `rng`.
+    pub fn fill(
+        &mut self,
+        config: &TrainPfNetConfig,
+        model: &PfNet,
+        data: &EpisodeSet,
+        episodes: &[usize],
+        rng: &mut impl Rng,
+    ) {
+        let (k, t) = (config.particles, config.steps as usize);
+        let grid = data.grid_cells * data.grid_cells;
+        let n = episodes.len() * t;
+        self.obs.resize(n * model.obs_len(), 0.0);
+        self.maps.resize(n * k * model.local_map_len(), 0.0);
+        self.states.clear();
+        self.targets.clear();
+        let (std_m, std_rad) = (config.init_std_m, config.init_std_deg.to_radians());
+        let (pos, rot) = (Normal::new(0.0, std_m).expect("σ ≥ 0"), Normal::new(0.0, std_rad).expect("σ ≥ 0"));
+        let noise = |rng: &mut _| Pose2::new(pos.sample(rng), pos.sample(rng), rot.sample(rng));
+        for (b, &e) in episodes.iter().enumerate() {
+            let episode: &RecordedEpisode = &data.episodes[e];
+            let centre = add(episode.poses[0], noise(rng));
+            let mut particles: Vec<Pose2> = (0..k).map(|_| add(centre, noise(rng))).collect();
+            for step in 0..t {
+                if step > 0 {
+                    particles.iter_mut().for_each(|p| *p = p.compose(&episode.odometry[step]));
+                }
+                let s = b * t + step;
+                let truth = episode.poses[step];
+                let obs = &mut self.obs[s * model.obs_len()..(s + 1) * model.obs_len()];
+                let grids = &episode.grids[step * grid..(step + 1) * grid];
+                obs.iter_mut().zip(grids).for_each(|(o, &g)| *o = f32::from(g) / 255.0);
+                let (xs, ys, yaws): (Vec<f32>, Vec<f32>, Vec<f32>) = (
+                    particles.iter().map(|p| p.x).collect(),
+                    particles.iter().map(|p| p.y).collect(),
+                    particles.iter().map(|p| p.yaw).collect(),
+                );
+                let len = k * model.local_map_len();
+                let out = &mut self.maps[s * len..(s + 1) * len];
+                crop_local_maps(
+                    &map_view(&data.maps[episode.map]),
+                    &xs,
+                    &ys,
+                    &yaws,
+                    &LocalMapSpec::default(),
+                    out,
+                );
+                // Headings relative to the truth's, so the linear mean of the loss is taken
+                // where it is meaningful (the reference's linear mean breaks across ±π).
+                self.states
+                    .extend(particles.iter().map(|p| [p.x, p.y, truth.yaw + wrap_angle(p.yaw - truth.yaw)]));
+                self.targets.push([truth.x, truth.y, truth.yaw]);
+            }
+        }
+    }
+
+    pub fn batch(&self, config: &TrainPfNetConfig) -> StepBatch<'_> {
+        StepBatch {
+            obs: &self.obs,
+            maps: &self.maps,
+            states: &self.states,
+            targets: &self.targets,
+            k: config.particles,
+            sequence: config.steps as usize,
+        }
+    }
+}
+
+fn add(p: Pose2, noise: Pose2) -> Pose2 {
+    Pose2::new(p.x + noise.x, p.y + noise.y, wrap_angle(p.yaw + noise.yaw))
+}
+
+/// The episodes of training step `step`: a fresh permutation of all episodes every epoch.
+pub fn batch_episodes(config: &TrainPfNetConfig, episodes: usize, step: u64) -> Vec<usize> {
+    let per_epoch = (episodes / config.batch).max(1) as u64;
+    let (epoch, within) = (step / per_epoch, (step % per_epoch) as usize);
+    let mut order: Vec<usize> = (0..episodes).collect();
+    order.shuffle(&mut stream(&[config.seed, 0xE90C, epoch]));
+    (0..config.batch).map(|i| order[(within * config.batch + i) % episodes]).collect()
+}
+
+/// Mean validation loss over the validation episodes (fixed particle draws).
+pub fn validation_loss(
+    config: &TrainPfNetConfig,
+    model: &PfNet,
+    data: &EpisodeSet,
+    buffers: &mut BatchBuffers,
+    pool: &Workspaces,
+) -> f64 {
+    let all: Vec<usize> = (0..data.episodes.len()).collect();
+    let mut total = 0.0;
+    for (i, chunk) in all.chunks(config.batch).enumerate() {
+        buffers.fill(config, model, data, chunk, &mut stream(&[config.seed, 0x7A1, i as u64]));
+        total += model.batch_loss(&buffers.batch(config), &config.loss(), pool) * chunk.len() as f64;
+    }
+    total / data.episodes.len() as f64
+}
+
+/// The resumable state of a run.
+pub struct TrainState {
+    pub model: PfNet,
+    pub adam: Adam,
+    /// Gradient steps done.
+    pub step: u64,
+    pub best_val_loss: f64,
+}
+
+const ADAM_M: &str = "adam.m/";
+const ADAM_V: &str = "adam.v/";
+
+impl TrainState {
+    pub fn new(config: &TrainPfNetConfig) -> anyhow::Result<Self> {
+        let network = PfNetConfig::named(&config.network).expect("checked");
+        let model = PfNet::new(network, config.seed).map_err(anyhow::Error::msg)?;
+        let adam = Adam::new(config.adam.clone(), model.params.len());
+        Ok(Self { model, adam, step: 0, best_val_loss: f64::INFINITY })
+    }
+
+    /// Weights, Adam's moments and step, the run's config and progress.
+    pub fn to_checkpoint(&self, config: &TrainPfNetConfig) -> Checkpoint {
+        let mut metadata = BTreeMap::new();
+        metadata.insert("train_config".into(), ron::to_string(config).expect("a config serialises"));
+        metadata.insert("step".into(), self.step.to_string());
+        metadata.insert("adam_step".into(), self.adam.step.to_string());
+        metadata.insert("best_val_loss".into(), format!("{:e}", self.best_val_loss));
+        let mut file = self.model.to_checkpoint(metadata);
+        file.push_buffer(&self.model.params, &self.adam.m, ADAM_M);
+        file.push_buffer(&self.model.params, &self.adam.v, ADAM_V);
+        file
+    }
+
+    pub fn from_checkpoint(file: &Checkpoint, config: &TrainPfNetConfig) -> anyhow::Result<Self> {
+        let model = PfNet::from_checkpoint(file)?;
+        let mut adam = Adam::new(config.adam.clone(), model.params.len());
+        file.read_buffer(&model.params, &mut adam.m, ADAM_M)?;
+        file.read_buffer(&model.params, &mut adam.v, ADAM_V)?;
+        let number = |key: &str| {
+            file.metadata.get(key).ok_or_else(|| anyhow::anyhow!("checkpoint: metadata `{key}` is missing"))
+        };
+        adam.step = number("adam_step")?.parse()?;
+        let step = number("step")?.parse()?;
+        let best_val_loss = number("best_val_loss")?.parse()?;
+        Ok(Self { model, adam, step, best_val_loss })
+    }
+
+    /// One gradient step on the batch of step `self.step`; returns its loss.
+    pub fn train_step(
+        &mut self,
+        config: &TrainPfNetConfig,
+        data: &EpisodeSet,
+        buffers: &mut BatchBuffers,
+        grads: &mut GradBuffers,
+        pool: &Workspaces,
+    ) -> f64 {
+        let episodes = batch_episodes(config, data.episodes.len(), self.step);
+        buffers.fill(config, &self.model, data, &episodes, &mut stream(&[config.seed, 0xBA7C, self.step]));
+        let loss = self.model.train_step(&buffers.batch(config), &config.loss(), &mut self.adam, grads, pool);
+        self.step += 1;
+        loss
+    }
+}
