@@ -24,7 +24,12 @@ fn run(
     let config = EvalConfig {
         schedules: vec![schedule(name)],
         tasks: vec![task],
-        maps: vec![MapGroup::Apartments { split: Split::Seen, first: 0, count: maps }],
+        maps: vec![MapGroup::Apartments {
+            split: Split::Seen,
+            first: 0,
+            count: maps,
+            params: Default::default(),
+        }],
         episodes: maps * 4,
         robots_per_map: 4,
         particles,

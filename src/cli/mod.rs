@@ -1,5 +1,6 @@
 //! The `apfn` command line: one file per subcommand; `main.rs` only parses and dispatches.
 
+pub mod collect;
 pub mod eval;
 pub mod localize;
 pub mod map;
@@ -38,6 +39,8 @@ pub enum Command {
     /// PF-net, the learned observation model: size, check against the Keras reference, speed.
     #[command(subcommand)]
     Pfnet(pfnet::PfNetCommand),
+    /// Simulate PF-net's training episodes and write them to disk in shards (resumable).
+    Collect(collect::CollectArgs),
     /// Train PF-net on simulated episodes (supervised, as the paper), with checkpoints and resume.
     TrainPfnet(train_pfnet::TrainPfNetArgs),
     /// List the registered systems with their parameters.
@@ -57,6 +60,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Pfnet(cmd) => pfnet::run(cmd),
         Command::Systems(cmd) => systems::run(cmd),
         Command::TrainPfnet(args) => train_pfnet::run(args),
+        Command::Collect(args) => collect::run(args),
     }
 }
 

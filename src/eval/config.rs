@@ -76,6 +76,11 @@ pub enum MapGroup {
         #[serde(default)]
         first: u64,
         count: usize,
+        /// Their shape (default: `ApartmentParams::default()`; the paper's size range with scan
+        /// realism is `(min_side_m: 5.0, max_side_m: 10.0, max_rooms: 5, mean_room_area_m2: 15.0,
+        /// realism: ())`, what PF-net trains on).
+        #[serde(default)]
+        params: ApartmentParams,
     },
     /// One ROS map (relative to the config file); its split is the map's name.
     Ros { path: PathBuf },
@@ -96,7 +101,7 @@ impl MapGroup {
     /// The table's `map` label: the seeds or the file.
     pub fn map_label(&self) -> String {
         match self {
-            MapGroup::Apartments { split, first, count } => {
+            MapGroup::Apartments { split, first, count, .. } => {
                 let start = split.seeds().start + first;
                 format!("apartments {start}..{}", start + *count as u64)
             }
@@ -107,12 +112,9 @@ impl MapGroup {
     /// Paths stay relative to the config file, which the scene resolves them against.
     fn map_source(&self) -> MapSource {
         match self {
-            MapGroup::Apartments { split, first, count } => MapSource::Procedural {
-                split: *split,
-                first: *first,
-                count: *count,
-                params: ApartmentParams::default(),
-            },
+            MapGroup::Apartments { split, first, count, params } => {
+                MapSource::Procedural { split: *split, first: *first, count: *count, params: params.clone() }
+            }
             MapGroup::Ros { path } => MapSource::Ros { paths: vec![path.clone()] },
         }
     }

@@ -5,7 +5,7 @@
 //! Timing as in `apfn record`: after agent step k, `PreviousPose` is the pose the step's scan
 //! (and so its grid) was taken from, and `Odometry.delta` is the motion since the previous scan.
 
-use crate::compose::{LoadedScene, Pipeline};
+use crate::compose::{LoadedScene, MapName, Pipeline};
 use crate::episode::Episode;
 use crate::plugin::headless_app;
 use crate::sense::{LocalGrid, Odometry};
@@ -31,6 +31,8 @@ pub struct RecordedEpisode {
 #[derive(Clone, Debug, Default)]
 pub struct EpisodeSet {
     pub maps: Vec<NetworkMap>,
+    /// The scene's names of those maps (`apartment_<seed>` for procedural ones).
+    pub map_names: Vec<String>,
     pub episodes: Vec<RecordedEpisode>,
     /// Side of a grid, cells.
     pub grid_cells: usize,
@@ -65,13 +67,14 @@ pub fn simulate_episodes(
     let (mut app, robots) = headless_app(scene, pipeline)?;
     let world = app.world_mut();
     let mut map_index = HashMap::new();
-    let mut maps = Vec::new();
-    for (entity, map) in world.query::<(bevy::prelude::Entity, &NetworkMap)>().iter(world) {
+    let (mut maps, mut map_names) = (Vec::new(), Vec::new());
+    for (entity, map, name) in world.query::<(bevy::prelude::Entity, &NetworkMap, &MapName)>().iter(world) {
         map_index.insert(entity, maps.len());
         maps.push(map.clone());
+        map_names.push(name.0.clone());
     }
     let mut current: Vec<Option<RecordedEpisode>> = vec![None; robots.len()];
-    let mut done = EpisodeSet { maps, episodes: Vec::with_capacity(count), grid_cells: 0 };
+    let mut done = EpisodeSet { maps, map_names, episodes: Vec::with_capacity(count), grid_cells: 0 };
     while done.episodes.len() < count {
         app.update();
         let world = app.world();

@@ -15,6 +15,7 @@ use crate::nn::pfnet::{
     GradBuffers, LocalMapSpec, PfNet, PfNetConfig, PoseLoss, StepBatch, Workspaces, crop_local_maps,
 };
 use crate::particles::map_view;
+use crate::train::collect::load_collection;
 use crate::train::episodes::{EpisodeSet, RecordedEpisode, simulate_episodes};
 use crate::world::map::procedural::{ApartmentParams, Split};
 use crate::world::rng::stream;
@@ -60,6 +61,9 @@ pub struct TrainPfNetConfig {
     pub seed: u64,
     /// The schedule that drives the episodes (relative to the working directory).
     pub collect_schedule: String,
+    /// A folder written by `apfn collect` to train on instead of simulating `train_episodes` on
+    /// `train_maps` (validation is always simulated on unseen apartments).
+    pub data: Option<String>,
 }
 
 impl Default for TrainPfNetConfig {
@@ -82,6 +86,7 @@ impl Default for TrainPfNetConfig {
             eval_every: 250,
             seed: 0,
             collect_schedule: "systems/collect_pfnet.ron".into(),
+            data: None,
         }
     }
 }
@@ -148,10 +153,17 @@ pub fn simulate_data(
         let name = if split == Split::Seen { "training" } else { "validation" };
         simulate_episodes(&loaded, pipeline.clone(), count, |done| progress(name, done))
     };
-    Ok([
-        simulate(Split::Seen, config.train_maps, config.train_episodes, 0)?,
-        simulate(Split::Unseen, config.val_maps, config.val_episodes, 1)?,
-    ])
+    let train = match &config.data {
+        Some(dir) => load_collection(Path::new(dir))?,
+        None => simulate(Split::Seen, config.train_maps, config.train_episodes, 0)?,
+    };
+    anyhow::ensure!(
+        train.steps() == config.steps as usize,
+        "data: episodes of {} steps, expected `steps` = {}",
+        train.steps(),
+        config.steps
+    );
+    Ok([train, simulate(Split::Unseen, config.val_maps, config.val_episodes, 1)?])
 }
 
 /// A batch's tensors, rebuilt every step into the same buffers.
