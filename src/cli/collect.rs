@@ -3,6 +3,7 @@
 
 use crate::compose::read_ron;
 use crate::train::collect::{CollectConfig, collect};
+use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -26,7 +27,8 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     let started = Instant::now();
     let per_shard = config.episodes_per_shard as u64;
     let manifest =
-        collect(&config, &args.out, |shard, done| bar.set_position(shard as u64 * per_shard + done as u64))?;
+        collect(&config, &args.out, |shard, done| bar.set_position(shard as u64 * per_shard + done as u64))
+            .with_context(|| format!("collecting with {}", args.config.display()))?;
     bar.finish_and_clear();
     println!(
         "{} shards of {} episodes in {} ({:.1} s); train on them with `data: Some(\"{}\")`",
