@@ -42,17 +42,31 @@ impl Dense {
         assert_eq!(dy.len(), n * o, "dy length");
         assert_eq!(dweight.len(), i * o, "dweight length");
         assert_eq!(dbias.len(), o, "dbias length");
-        let dy_m = MatRef::row_major(dy, n, o);
-        matmul(MatMut::row_major(dweight, i, o), MatRef::row_major(x, n, i).t(), dy_m, true);
+        matmul(
+            MatMut::row_major(dweight, i, o),
+            MatRef::row_major(x, n, i).t(),
+            MatRef::row_major(dy, n, o),
+            true,
+        );
         for row in dy.chunks_exact(o.max(1)) {
             for (b, &d) in dbias.iter_mut().zip(row) {
                 *b += d;
             }
         }
         if let Some(dx) = dx {
-            assert_eq!(dx.len(), n * i, "dx length");
-            matmul(MatMut::row_major(dx, n, i), dy_m, MatRef::row_major(weight, i, o).t(), true);
+            self.backward_input(weight, n, dy, dx);
         }
+    }
+
+    /// Accumulates only `dx += dy·Wᵀ`: backpropagating through a layer whose weights are frozen
+    /// (SAC's actor loss flows through the critics without training them).
+    pub fn backward_input(&self, weight: &[f32], n: usize, dy: &[f32], dx: &mut [f32]) {
+        let (i, o) = (self.inputs, self.outputs);
+        assert_eq!(weight.len(), i * o, "weight length");
+        assert_eq!(dy.len(), n * o, "dy length");
+        assert_eq!(dx.len(), n * i, "dx length");
+        let dy_m = MatRef::row_major(dy, n, o);
+        matmul(MatMut::row_major(dx, n, i), dy_m, MatRef::row_major(weight, i, o).t(), true);
     }
 }
 

@@ -15,3 +15,4 @@ pub mod locally_connected;
 pub mod params;
 pub mod pfnet;
 pub mod pool;
+pub mod sac;

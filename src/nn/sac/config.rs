@@ -1,0 +1,96 @@
+//! The shapes of the SAC networks: the APFN authors' run and a compact variant for CPUs.
+
+use serde::{Deserialize, Serialize};
+
+/// Robot state appended to the image features: v, ω, the collision flag, the fraction of the
+/// episode left.
+pub const STATE_LEN: usize = 4;
+/// Normalised (linear, angular) velocity.
+pub const ACTION_LEN: usize = 2;
+
+/// Every image input has its own CNN of 3×3 stride-2 'valid' convolutions with ReLU, closed by a
+/// dense layer with ReLU; the features of both encoders and the robot state feed the actor and
+/// the twin critics, MLPs of two hidden layers.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SacNetConfig {
+    /// Output channels of each encoder's convolutions, in order.
+    pub conv_channels: Vec<usize>,
+    /// Width of the dense layer closing each encoder.
+    pub encoder_fc: usize,
+    /// Width of the hidden layers of the actor and critic MLPs.
+    pub mlp_width: usize,
+    /// Side of the belief crop, cells, and its channels (4 per crop).
+    pub belief_cells: usize,
+    pub belief_channels: usize,
+    /// Side of the LiDAR occupancy grid, cells.
+    pub grid_cells: usize,
+}
+
+impl SacNetConfig {
+    /// The authors' run: (32, 64, 64, 64) channels, FC 512, MLP 512 × 2.
+    pub fn paper() -> Self {
+        Self {
+            conv_channels: vec![32, 64, 64, 64],
+            encoder_fc: 512,
+            mlp_width: 512,
+            belief_cells: 50,
+            belief_channels: 4,
+            grid_cells: 56,
+        }
+    }
+
+    /// A quarter of the paper's encoder width and half its MLP (the JAX peer's compact variant):
+    /// ≈ 6× fewer FLOPs per update on the same inputs.
+    pub fn compact() -> Self {
+        Self { conv_channels: vec![16, 32, 32, 32], encoder_fc: 128, mlp_width: 256, ..Self::paper() }
+    }
+
+    /// Length of the actor's and critics' input before the action: both encoders and the state.
+    pub fn feature_len(&self) -> usize {
+        2 * self.encoder_fc + STATE_LEN
+    }
+
+    /// `Err("field: expected …")` when the shapes cannot build a network.
+    pub fn check(&self) -> Result<(), String> {
+        let fits = |side: usize| {
+            self.conv_channels
+                .iter()
+                .try_fold(side, |s, _| (s >= 3).then(|| (s - 3) / 2 + 1))
+                .is_some_and(|s| s >= 1)
+        };
+        let positive =
+            |v: usize, field: &str| if v > 0 { Ok(()) } else { Err(format!("{field}: expected ≥ 1")) };
+        positive(self.conv_channels.len(), "conv_channels")?;
+        if self.conv_channels.contains(&0) {
+            return Err("conv_channels: expected every layer to have ≥ 1 channel".into());
+        }
+        positive(self.encoder_fc, "encoder_fc")?;
+        positive(self.mlp_width, "mlp_width")?;
+        positive(self.belief_channels, "belief_channels")?;
+        for (side, field) in [(self.belief_cells, "belief_cells"), (self.grid_cells, "grid_cells")] {
+            if !fits(side) {
+                return Err(format!(
+                    "{field}: expected a side large enough for {} stride-2 3×3 convolutions, got {side}",
+                    self.conv_channels.len()
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn configs_check_and_bad_shapes_name_the_field() {
+        assert_eq!(SacNetConfig::paper().check(), Ok(()));
+        assert_eq!(SacNetConfig::compact().check(), Ok(()));
+        let tiny = SacNetConfig { grid_cells: 8, ..SacNetConfig::paper() };
+        assert!(tiny.check().unwrap_err().starts_with("grid_cells:"), "{:?}", tiny.check());
+        let empty = SacNetConfig { conv_channels: vec![], ..SacNetConfig::paper() };
+        assert!(empty.check().unwrap_err().starts_with("conv_channels:"));
+    }
+}

@@ -1,0 +1,189 @@
+//! One image encoder of the agent: 3×3 stride-2 'valid' convolutions with ReLU, flattened, then a
+//! dense layer with ReLU (the authors' `rl_architecture 2`).
+
+use crate::nn::activation::{relu_backward, relu_forward};
+use crate::nn::conv::{Conv2d, Padding};
+use crate::nn::dense::Dense;
+use crate::nn::params::Params;
+use crate::nn::sac::layer::WeightBias;
+
+#[derive(Clone, Debug, PartialEq)]
+struct ConvLayer {
+    conv: Conv2d,
+    /// Input height = width of this layer.
+    side: usize,
+    wb: WeightBias,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImageEncoder {
+    convs: Vec<ConvLayer>,
+    /// Flattened output of the last convolution.
+    flat: usize,
+    dense: Dense,
+    dense_wb: WeightBias,
+    input_len: usize,
+}
+
+/// What a forward pass over `n` images keeps for its backward pass, and the backward's buffers
+/// (sized on first use, then reused: no allocation per update).
+#[derive(Clone, Debug, Default)]
+pub struct EncoderActivations {
+    /// Post-ReLU output of every convolution.
+    conv_out: Vec<Vec<f32>>,
+    /// Post-ReLU output of the dense layer: the features, `[n][fc]`.
+    pub features: Vec<f32>,
+    d_pre: Vec<f32>,
+    d_input: Vec<f32>,
+    scratch: Vec<f32>,
+}
+
+impl ImageEncoder {
+    /// Adds the encoder's tensors (`name/conv{i}`, `name/fc`) to `params`.
+    pub fn new(
+        params: &mut Params,
+        name: &str,
+        channels: usize,
+        side: usize,
+        conv_channels: &[usize],
+        fc: usize,
+    ) -> Self {
+        let (mut c_in, mut s) = (channels, side);
+        let mut convs = Vec::with_capacity(conv_channels.len());
+        for (i, &c_out) in conv_channels.iter().enumerate() {
+            let conv = Conv2d { c_in, c_out, kernel: 3, stride: 2, dilation: 1, padding: Padding::Valid };
+            let wb = WeightBias::add(params, &format!("{name}/conv{i}"), &[c_out, c_in, 3, 3], c_out);
+            convs.push(ConvLayer { conv, side: s, wb });
+            (c_in, s) = (c_out, conv.output_size(s, s).0);
+        }
+        let flat = c_in * s * s;
+        let dense = Dense { inputs: flat, outputs: fc };
+        let dense_wb = WeightBias::add(params, &format!("{name}/fc"), &[flat, fc], fc);
+        Self { convs, flat, dense, dense_wb, input_len: channels * side * side }
+    }
+
+    /// Values per input image.
+    pub fn input_len(&self) -> usize {
+        self.input_len
+    }
+
+    /// Features per image.
+    pub fn output_len(&self) -> usize {
+        self.dense.outputs
+    }
+
+    pub fn init(&self, params: &mut Params, rng: &mut impl rand::Rng) {
+        for l in &self.convs {
+            let taps = l.conv.kernel * l.conv.kernel;
+            l.wb.init(params, l.conv.c_in * taps, l.conv.c_out * taps, rng);
+        }
+        self.dense_wb.init(params, self.flat, self.dense.outputs, rng);
+    }
+
+    /// `x`: `[n][channels][side][side]` → `acts.features` `[n][fc]`.
+    pub fn forward(&self, values: &[f32], x: &[f32], n: usize, acts: &mut EncoderActivations) {
+        assert_eq!(x.len(), n * self.input_len, "encoder input length");
+        acts.conv_out.resize(self.convs.len(), Vec::new());
+        for (i, l) in self.convs.iter().enumerate() {
+            let (done, rest) = acts.conv_out.split_at_mut(i);
+            let input = if i == 0 { x } else { &done[i - 1] };
+            let (oh, ow) = l.conv.output_size(l.side, l.side);
+            let y = &mut rest[0];
+            y.resize(n * l.conv.c_out * oh * ow, 0.0);
+            let (w, b) = (l.wb.weight(values), l.wb.bias(values));
+            l.conv.forward(w, b, input, n, l.side, l.side, y, l.conv.c_out, 0, &mut acts.scratch);
+            relu_forward(y);
+        }
+        acts.features.resize(n * self.dense.outputs, 0.0);
+        let last = acts.conv_out.last().expect("at least one convolution");
+        self.dense.forward(
+            self.dense_wb.weight(values),
+            self.dense_wb.bias(values),
+            last,
+            n,
+            &mut acts.features,
+        );
+        relu_forward(&mut acts.features);
+    }
+
+    /// Accumulates into `grads` (laid out like the arena) the gradient of a loss whose gradient
+    /// with respect to `acts.features` is `d_features`. The input image gets no gradient.
+    pub fn backward(
+        &self,
+        values: &[f32],
+        x: &[f32],
+        n: usize,
+        acts: &mut EncoderActivations,
+        d_features: &[f32],
+        grads: &mut [f32],
+    ) {
+        let EncoderActivations { conv_out, features, d_pre, d_input, scratch } = acts;
+        reset(d_pre, features.len());
+        relu_backward(features, d_features, d_pre);
+        let last = conv_out.last().expect("forward ran");
+        reset(d_input, last.len());
+        let (dw, db) = self.dense_wb.split_mut(grads);
+        self.dense.backward(self.dense_wb.weight(values), last, n, d_pre, dw, db, Some(d_input));
+        for (i, l) in self.convs.iter().enumerate().rev() {
+            // d_input holds d(post-ReLU output of layer i); through the ReLU into d_pre.
+            reset(d_pre, conv_out[i].len());
+            relu_backward(&conv_out[i], d_input, d_pre);
+            let input = if i == 0 { x } else { &conv_out[i - 1] };
+            let (dw, db) = l.wb.split_mut(grads);
+            let dx = if i == 0 {
+                None
+            } else {
+                reset(d_input, input.len());
+                Some(&mut d_input[..])
+            };
+            l.conv.backward(
+                l.wb.weight(values),
+                input,
+                n,
+                l.side,
+                l.side,
+                d_pre,
+                l.conv.c_out,
+                0,
+                dw,
+                db,
+                dx,
+                scratch,
+            );
+        }
+    }
+}
+
+/// Zeroes `buf` at length `len` (backward passes accumulate).
+fn reset(buf: &mut Vec<f32>, len: usize) {
+    buf.clear();
+    buf.resize(len, 0.0);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::gradcheck::{assert_close, numerical_grad, test_values};
+
+    #[test]
+    fn backward_matches_finite_differences() {
+        let mut params = Params::new();
+        let enc = ImageEncoder::new(&mut params, "enc", 2, 9, &[3, 2], 4);
+        params.values = test_values(params.len(), 7).iter().map(|v| v * 0.6).collect();
+        let n = 2;
+        let x: Vec<f32> = test_values(n * enc.input_len(), 8).iter().map(|v| v.abs()).collect();
+        let r = test_values(n * 4, 9);
+        let mut acts = EncoderActivations::default();
+        let loss = |values: &[f32]| -> f64 {
+            let mut a = EncoderActivations::default();
+            enc.forward(values, &x, n, &mut a);
+            a.features.iter().zip(&r).map(|(f, r)| f64::from(f * r)).sum()
+        };
+        enc.forward(&params.values, &x, n, &mut acts);
+        let mut grads = vec![0.0; params.len()];
+        enc.backward(&params.values, &x, n, &mut acts, &r, &mut grads);
+        let v64: Vec<f64> = params.values.iter().map(|&v| f64::from(v)).collect();
+        let numeric = numerical_grad(&v64, 1e-2, |v| loss(&v.iter().map(|&a| a as f32).collect::<Vec<_>>()));
+        assert_close(&grads, &numeric, 2e-2, "encoder gradient");
+    }
+}
