@@ -4,6 +4,7 @@ mod action;
 mod avoid;
 mod goalnav;
 mod random;
+pub mod sac;
 mod turn;
 
 pub use action::Action;

@@ -10,6 +10,7 @@ pub mod run;
 pub mod sweep;
 pub mod systems;
 pub mod train_pfnet;
+pub mod train_sac;
 
 use clap::{Parser, Subcommand};
 
@@ -43,6 +44,8 @@ pub enum Command {
     Collect(collect::CollectArgs),
     /// Train PF-net on simulated episodes (supervised, as the paper), with checkpoints and resume.
     TrainPfnet(train_pfnet::TrainPfNetArgs),
+    /// Train the APFN agent (SAC) with the filter in the loop; checkpoints, log, curves, --resume.
+    TrainSac(train_sac::TrainSacArgs),
     /// List the registered systems with their parameters.
     #[command(subcommand)]
     Systems(systems::SystemsCommand),
@@ -60,6 +63,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Pfnet(cmd) => pfnet::run(cmd),
         Command::Systems(cmd) => systems::run(cmd),
         Command::TrainPfnet(args) => train_pfnet::run(args),
+        Command::TrainSac(args) => train_sac::run(args),
         Command::Collect(args) => collect::run(args),
     }
 }

@@ -2,6 +2,9 @@
 //! likelihood, a belief projection, an agent) joins by adding one `register` call here.
 
 use crate::act::{drive, physics};
+use crate::agent::sac::{
+    RewardParams, SacPolicyParams, SacUpdateParams, localization_reward, sac_policy, sac_update,
+};
 use crate::agent::{
     AvoidParams, GoalnavParams, TurnParams, avoid_policy, goalnav_policy, random_policy, turn_policy,
 };
@@ -173,6 +176,16 @@ pub fn standard_registry() -> Registry {
         ),
         step_metrics,
     )
+    .register::<RewardParams, _, _>(
+        spec(
+            "localization_reward",
+            Evaluate,
+            "Reads PoseEstimate, TruePose, Collided, EpisodeStart. Writes Reward (of the last action).",
+            &["EpisodeStart", "PoseEstimate"],
+            &["Reward"],
+        ),
+        localization_reward,
+    )
     .register::<NoParams, _, _>(
         spec("random_policy", Agent, "Reads ScenarioRng. Writes Action.", &[], &["Action"]),
         random_policy,
@@ -188,6 +201,20 @@ pub fn standard_registry() -> Registry {
     .register::<GoalnavParams, _, _>(
         spec("goalnav_policy", Agent, "Reads TruePose (or PoseEstimate), EpisodeStart, the map's TraversableMap, ScenarioRng. Writes GoalPlan, Action.", &[], &["Action"]),
         goalnav_policy,
+    )
+    .register::<SacPolicyParams, _, _>(
+        spec(
+            "sac_policy",
+            Agent,
+            "Reads BeliefCrop, LocalGrid, Collided, Episode, Reward, the learning agent if any. Writes Action, the agent's replay buffer.",
+            &["BeliefCrop", "LocalGrid", "Reward"],
+            &["Action"],
+        ),
+        sac_policy,
+    )
+    .register::<SacUpdateParams, _, _>(
+        spec("sac_update", Agent, "Reads the learning agent's replay buffer. Writes its networks.", &[], &[]),
+        sac_update,
     )
     .register::<NoParams, _, _>(
         spec("drive", Act, "Reads Action, RobotParams. Writes DriveCommand.", &["Action"], &["DriveCommand"]),

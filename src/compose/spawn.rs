@@ -3,6 +3,7 @@
 
 use crate::act::{Collided, DriveCommand, MapPhysics};
 use crate::agent::Action;
+use crate::agent::sac::Reward;
 use crate::belief::BeliefCrop;
 use crate::compose::error::ComposeError;
 use crate::compose::scene::{LoadedScene, NamedMap};
@@ -73,7 +74,7 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
                         FilterHealth::default(),
                         BeliefCrop::default(),
                     ),
-                    (StepError::default(), EpisodeLog::default()),
+                    (StepError::default(), EpisodeLog::default(), Reward::default()),
                 ))
                 .id();
             robots.push(robot);

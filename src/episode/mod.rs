@@ -10,4 +10,4 @@ pub use metrics::{
     CellMetrics, CompletedEpisodes, EpisodeLog, EpisodeRecord, FIGURE_PARTICLES, LOSS_BETA, SUCCESS_RADIUS_M,
     StepError, step_metrics, succeeded, summarize,
 };
-pub use reset::{Episode, EpisodeParams, EpisodeStart, episode_reset};
+pub use reset::{Episode, EpisodeEnd, EpisodeParams, EpisodeStart, episode_reset};

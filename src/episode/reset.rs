@@ -1,6 +1,7 @@
 //! Fixed-length episodes: when one ends, the robot restarts at a new random traversable pose.
 
-use crate::act::{MapPhysics, PhysicsBody};
+use crate::act::{Collided, MapPhysics, PhysicsBody};
+use crate::agent::Action;
 use crate::particles::ParticleSet;
 use crate::world::map::{START_POSE_TRIES, TraversableMap};
 use crate::world::{OccupancyMap, OnMap, Pose2, PreviousPose, RobotParams, ScenarioRng, TruePose};
@@ -37,9 +38,15 @@ pub struct Episode {
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct EpisodeStart;
 
+/// Marks a robot in the last step of its episode: the step's filter update is the episode's
+/// last, and whatever it does next is never rewarded (the next step restarts elsewhere).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct EpisodeEnd;
+
 /// Reads EpisodeParams, RobotParams, the map's OccupancyMap and TraversableMap, the other robots'
-/// TruePose. Writes Episode, TruePose, PreviousPose, MapPhysics, ScenarioRng, EpisodeStart, and
-/// empties the ParticleSet so that `init_particles` draws a fresh one for the new episode.
+/// TruePose. Writes Episode, TruePose, PreviousPose, MapPhysics, ScenarioRng, EpisodeStart,
+/// EpisodeEnd, and empties the ParticleSet so that `init_particles` draws a fresh one for the new
+/// episode; clears Action and Collided, so nothing of the last episode leaks into the new one.
 /// Robots that collide with each other restart at least two radii apart, as they spawn.
 pub fn episode_reset(
     params: Res<EpisodeParams>,
@@ -54,6 +61,7 @@ pub fn episode_reset(
         (&mut TruePose, &mut PreviousPose),
         &mut ScenarioRng,
         Option<&mut ParticleSet>,
+        (Option<&mut Action>, Option<&mut Collided>),
     )>,
 ) {
     let map_entities: Vec<Entity> = maps.iter().map(|(entity, ..)| entity).collect();
@@ -61,10 +69,18 @@ pub fn episode_reset(
     let mut positions: Vec<(Entity, Entity, Pose2)> =
         robots.iter().map(|(robot, on_map, _, _, (pose, _), ..)| (robot, on_map.0, pose.0)).collect();
     let min_gap = 2.0 * body_size.radius_m;
-    for (robot, mut on_map, mut body, mut episode, (mut pose, mut previous), mut rng, particles) in
-        &mut robots
+    for (
+        robot,
+        mut on_map,
+        mut body,
+        mut episode,
+        (mut pose, mut previous),
+        mut rng,
+        particles,
+        (action, collided),
+    ) in &mut robots
     {
-        commands.entity(robot).remove::<EpisodeStart>();
+        commands.entity(robot).remove::<(EpisodeStart, EpisodeEnd)>();
         if episode.step >= params.steps {
             let next_map = match map_entities.len() {
                 n if params.change_maps && n > 1 => map_entities[rng.0.random_range(0..n)],
@@ -105,11 +121,20 @@ pub fn episode_reset(
             if let Some(mut particles) = particles {
                 *particles = ParticleSet::default();
             }
+            if let Some(mut action) = action {
+                *action = Action::default();
+            }
+            if let Some(mut collided) = collided {
+                *collided = Collided(false);
+            }
         }
         if episode.step == 0 {
             commands.entity(robot).insert(EpisodeStart);
         }
         episode.step += 1;
+        if episode.step == params.steps {
+            commands.entity(robot).insert(EpisodeEnd);
+        }
     }
 }
 
@@ -140,14 +165,26 @@ mod tests {
                 PreviousPose(start),
                 ScenarioRng::seeded(1),
                 ParticleSet::from_poses(&[start]),
+                (Action::new(0.5, 0.5), Collided(false)),
             ))
             .id();
         world.run_system_once(episode_reset).unwrap();
         assert!(world.get::<EpisodeStart>(robot).is_some(), "first step starts an episode");
+        assert!(world.get::<EpisodeEnd>(robot).is_none(), "and is not its last");
         assert_eq!(*world.get::<Episode>(robot).unwrap(), Episode { index: 0, step: 1 });
         world.run_system_once(episode_reset).unwrap();
         assert!(world.get::<EpisodeStart>(robot).is_none(), "step 2 continues the episode");
+        assert!(world.get::<EpisodeEnd>(robot).is_some(), "step 2 of 2 is the last");
+        // The last step's action bumps into something: the new episode must not inherit it.
+        world.entity_mut(robot).insert(Collided(true));
         world.run_system_once(episode_reset).unwrap();
+        assert!(world.get::<EpisodeEnd>(robot).is_none());
+        assert_eq!(
+            world.get::<Collided>(robot),
+            Some(&Collided(false)),
+            "a new episode starts without a bump"
+        );
+        assert_eq!(world.get::<Action>(robot), Some(&Action::default()), "and standing still");
         assert_eq!(
             *world.get::<Episode>(robot).unwrap(),
             Episode { index: 1, step: 1 },

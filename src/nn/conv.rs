@@ -119,12 +119,16 @@ impl Conv2d {
         }
     }
 
-    /// cols [K × P] ← taps of x_n [c_in][h][w], zero in the padding.
-    fn im2col(&self, g: &Geometry, x_n: &[f32], cols: &mut [f32]) {
-        cols.fill(0.0);
-        let s = self.stride;
+    /// Sample `i` of a group's columns: cols [K × stride] ← taps of x_n [c_in][h][w] into
+    /// columns `i·P .. (i+1)·P` of every row, zero in the padding.
+    fn im2col(&self, g: &Geometry, x_n: &[f32], cols: &mut [f32], (stride, i): (usize, usize)) {
+        let (s, p) = (self.stride, g.pixels());
+        for row in cols.chunks_exact_mut(stride) {
+            row[i * p..(i + 1) * p].fill(0.0);
+        }
         self.for_each_run(g, |col, x, len| {
-            let dst = &mut cols[col..col + len];
+            let at = (col / p) * stride + i * p + col % p;
+            let dst = &mut cols[at..at + len];
             if s == 1 {
                 dst.copy_from_slice(&x_n[x..x + len]);
             } else {
@@ -135,11 +139,12 @@ impl Conv2d {
         });
     }
 
-    /// dx_n [c_in][h][w] += scatter of dcols [K × P] (the adjoint of `im2col`).
-    fn col2im(&self, g: &Geometry, dcols: &[f32], dx_n: &mut [f32]) {
-        let s = self.stride;
+    /// dx_n [c_in][h][w] += scatter of sample `i`'s columns of dcols [K × stride] (the adjoint of `im2col`).
+    fn col2im(&self, g: &Geometry, dcols: &[f32], (stride, i): (usize, usize), dx_n: &mut [f32]) {
+        let (s, p) = (self.stride, g.pixels());
         self.for_each_run(g, |col, x, len| {
-            let src = &dcols[col..col + len];
+            let at = (col / p) * stride + i * p + col % p;
+            let src = &dcols[at..at + len];
             if s == 1 {
                 for (d, v) in dx_n[x..x + len].iter_mut().zip(src) {
                     *d += *v;
@@ -150,6 +155,12 @@ impl Conv2d {
                 }
             }
         });
+    }
+
+    /// Samples per im2col GEMM: enough columns (≈ 4,096) that small outputs (a 2 × 2 map in SAC's
+    /// last layer) still make one efficient GEMM, few enough that the columns stay in cache.
+    fn group(&self, g: &Geometry, n: usize) -> usize {
+        (4096 / g.pixels().max(1)).clamp(1, n.max(1))
     }
 
     /// Shared length checks of forward/backward; `y_len` is y's (or dy's) length.
@@ -195,6 +206,8 @@ impl Conv2d {
         self.forward_im2col(&g, weight, bias, x, y, y_channels, y_offset, scratch);
     }
 
+    /// Groups of samples share one GEMM: W [c_out × K] · cols [K × G·P], then each sample's
+    /// block is copied (plus bias) into its channel slice.
     #[allow(clippy::too_many_arguments)]
     fn forward_im2col(
         &self,
@@ -207,18 +220,33 @@ impl Conv2d {
         y_offset: usize,
         scratch: &mut Vec<f32>,
     ) {
-        let (k, p) = (self.taps(), g.pixels());
-        if scratch.len() < k * p {
-            scratch.resize(k * p, 0.0);
+        let (k, p, x_len) = (self.taps(), g.pixels(), self.c_in * g.h * g.w);
+        let n = x.len() / x_len.max(1);
+        let group = self.group(g, n);
+        let need = k * group * p + self.c_out * group * p;
+        if scratch.len() < need {
+            scratch.resize(need, 0.0);
         }
-        let cols = &mut scratch[..k * p];
+        let (cols, out) = scratch[..need].split_at_mut(k * group * p);
         let wm = MatRef::row_major(weight, self.c_out, k);
-        for (x_n, y_n) in x.chunks_exact(self.c_in * g.h * g.w).zip(y.chunks_exact_mut(y_channels * p)) {
-            self.im2col(g, x_n, cols);
-            let y_slice = &mut y_n[y_offset * p..(y_offset + self.c_out) * p];
-            matmul(MatMut::row_major(y_slice, self.c_out, p), wm, MatRef::row_major(cols, k, p), false);
-            for (row, &b) in y_slice.chunks_exact_mut(p).zip(bias) {
-                row.iter_mut().for_each(|v| *v += b);
+        for (x_g, y_g) in x.chunks(group * x_len).zip(y.chunks_mut(group * y_channels * p)) {
+            let m = x_g.len() / x_len;
+            let stride = m * p;
+            for (i, x_n) in x_g.chunks_exact(x_len).enumerate() {
+                self.im2col(g, x_n, &mut cols[..k * stride], (stride, i));
+            }
+            let out = &mut out[..self.c_out * stride];
+            matmul(
+                MatMut::row_major(out, self.c_out, stride),
+                wm,
+                MatRef::row_major(&cols[..k * stride], k, stride),
+                false,
+            );
+            for (i, y_n) in y_g.chunks_exact_mut(y_channels * p).enumerate() {
+                let y_slice = &mut y_n[y_offset * p..(y_offset + self.c_out) * p];
+                for ((dst, src), &b) in y_slice.chunks_exact_mut(p).zip(out.chunks_exact(stride)).zip(bias) {
+                    dst.iter_mut().zip(&src[i * p..(i + 1) * p]).for_each(|(d, v)| *d = v + b);
+                }
             }
         }
     }
@@ -284,6 +312,7 @@ impl Conv2d {
         self.backward_im2col(&g, weight, x, dy, dy_slice, dweight, dbias, dx, scratch);
     }
 
+    /// Per group of samples: dW += dY [c_out × G·P] · colsᵀ, dcols = Wᵀ · dY, scattered back.
     #[allow(clippy::too_many_arguments)]
     fn backward_im2col(
         &self,
@@ -299,26 +328,44 @@ impl Conv2d {
     ) {
         let (k, p, x_len) = (self.taps(), g.pixels(), self.c_in * g.h * g.w);
         let n = x.len() / x_len.max(1);
-        let need = if dx.is_some() { 2 * k * p } else { k * p };
+        let group = self.group(g, n);
+        let cols_len = k * group * p;
+        let need = 2 * cols_len + self.c_out * group * p;
         if scratch.len() < need {
             scratch.resize(need, 0.0);
         }
-        let (cols, dcols) = scratch[..need].split_at_mut(k * p);
+        let (cols, rest) = scratch[..need].split_at_mut(cols_len);
+        let (dcols, dy_g) = rest.split_at_mut(cols_len);
         let wm = MatRef::row_major(weight, self.c_out, k);
-        for i in 0..n {
-            let x_n = &x[i * x_len..(i + 1) * x_len];
-            let dy_n = &dy[(i * y_channels + y_offset) * p..(i * y_channels + y_offset + self.c_out) * p];
-            let dym = MatRef::row_major(dy_n, self.c_out, p);
-            self.im2col(g, x_n, cols);
-            // dW [c_out × K] += dy_n [c_out × P] · colsᵀ [P × K]
-            matmul(MatMut::row_major(dweight, self.c_out, k), dym, MatRef::row_major(cols, k, p).t(), true);
-            for (db, row) in dbias.iter_mut().zip(dy_n.chunks_exact(p)) {
+        for (first, x_g) in (0..n).step_by(group).zip(x.chunks(group * x_len)) {
+            let m = x_g.len() / x_len;
+            let stride = m * p;
+            let dym = &mut dy_g[..self.c_out * stride];
+            for (i, x_n) in x_g.chunks_exact(x_len).enumerate() {
+                self.im2col(g, x_n, &mut cols[..k * stride], (stride, i));
+                let at = ((first + i) * y_channels + y_offset) * p;
+                for (o, src) in dy[at..at + self.c_out * p].chunks_exact(p).enumerate() {
+                    dym[o * stride + i * p..o * stride + (i + 1) * p].copy_from_slice(src);
+                }
+            }
+            let dy_mat = MatRef::row_major(dym, self.c_out, stride);
+            // dW [c_out × K] += dY [c_out × G·P] · colsᵀ [G·P × K]
+            matmul(
+                MatMut::row_major(dweight, self.c_out, k),
+                dy_mat,
+                MatRef::row_major(&cols[..k * stride], k, stride).t(),
+                true,
+            );
+            for (db, row) in dbias.iter_mut().zip(dym.chunks_exact(stride)) {
                 *db += sum(row);
             }
             if let Some(dx) = dx.as_deref_mut() {
-                // dcols [K × P] = Wᵀ [K × c_out] · dy_n [c_out × P], then scatter back onto the pixels.
-                matmul(MatMut::row_major(dcols, k, p), wm.t(), dym, false);
-                self.col2im(g, dcols, &mut dx[i * x_len..(i + 1) * x_len]);
+                // dcols [K × G·P] = Wᵀ [K × c_out] · dY, then scattered back onto each sample's pixels.
+                matmul(MatMut::row_major(&mut dcols[..k * stride], k, stride), wm.t(), dy_mat, false);
+                for i in 0..m {
+                    let dx_n = &mut dx[(first + i) * x_len..(first + i + 1) * x_len];
+                    self.col2im(g, &dcols[..k * stride], (stride, i), dx_n);
+                }
             }
         }
     }

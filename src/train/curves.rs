@@ -1,4 +1,5 @@
-//! The learning curves of a training run as a PNG: training and validation loss per logged step.
+//! The learning curves of a training run as a PNG: two series per logged step (PF-net: training
+//! and validation loss; SAC: the episodes' pose loss, at the end and summed).
 
 use crate::eval::{FigureError, PixelText, encode_png};
 use image::{Rgb, RgbImage};
@@ -13,8 +14,25 @@ fn draw_err(e: impl std::error::Error) -> FigureError {
     FigureError::Draw(e.to_string())
 }
 
+/// Axis descriptions and the two series' names.
+pub struct CurveLabels<'a> {
+    pub x: &'a str,
+    pub y: &'a str,
+    pub series: [&'a str; 2],
+}
+
 /// PNG bytes of the curves; `points` are (step, training loss, validation loss).
 pub fn loss_curves_png(points: &[(u64, f64, f64)], title: &str) -> Result<Vec<u8>, FigureError> {
+    let labels = CurveLabels { x: "gradient step", y: "loss", series: ["training", "validation"] };
+    curves_png(points, title, &labels)
+}
+
+/// PNG bytes of two curves; `points` are (x, first series, second series).
+pub fn curves_png(
+    points: &[(u64, f64, f64)],
+    title: &str,
+    labels: &CurveLabels,
+) -> Result<Vec<u8>, FigureError> {
     let mut canvas = RgbImage::from_pixel(SIZE.0, SIZE.1, Rgb([255, 255, 255]));
     {
         let root = PixelText(BitMapBackend::with_buffer(&mut canvas, SIZE)).into_drawing_area();
@@ -30,8 +48,8 @@ pub fn loss_curves_png(points: &[(u64, f64, f64)], title: &str) -> Result<Vec<u8
             .map_err(draw_err)?;
         chart
             .configure_mesh()
-            .x_desc("gradient step")
-            .y_desc("loss")
+            .x_desc(labels.x)
+            .y_desc(labels.y)
             .x_labels(6)
             .y_labels(6)
             .x_label_formatter(&|x| format!("{x:.0}"))
@@ -41,7 +59,7 @@ pub fn loss_curves_png(points: &[(u64, f64, f64)], title: &str) -> Result<Vec<u8
             .light_line_style(RGBColor(236, 236, 236))
             .draw()
             .map_err(draw_err)?;
-        for (name, colour, pick) in [("training", TRAIN, 1), ("validation", VALIDATION, 2)] {
+        for (name, colour, pick) in [(labels.series[0], TRAIN, 1), (labels.series[1], VALIDATION, 2)] {
             let series = points.iter().map(|p| (p.0 as f64, if pick == 1 { p.1 } else { p.2 }));
             let style = colour.stroke_width(3);
             chart

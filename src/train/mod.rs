@@ -1,7 +1,8 @@
 //! Training loops driven by the command line, each reading top to bottom: PF-net's supervised
-//! pretraining on simulated episodes, and the collection of those episodes to disk.
+//! pretraining on simulated episodes, the collection of those episodes to disk, and the SAC agent.
 
 pub mod collect;
 pub mod curves;
 pub mod episodes;
 pub mod pfnet;
+pub mod sac;

@@ -5,6 +5,7 @@ pub mod encoder;
 mod layer;
 pub mod mlp;
 pub mod networks;
+pub mod saved;
 pub mod tanh_gaussian;
 pub mod update;
 

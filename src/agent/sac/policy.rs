@@ -1,0 +1,288 @@
+//! `sac_policy`: one batched actor forward pass for every robot in the world. With a learning
+//! agent in the world it samples actions (uniformly at random while warming up) and stores each
+//! robot's transitions; otherwise it acts deterministically, tanh(μ), with a policy checkpoint.
+
+use crate::act::Collided;
+use crate::agent::Action;
+use crate::agent::sac::learner::{EpisodeReturn, Pending, SacAgent};
+use crate::agent::sac::observation::{ObservationShape, decode, encode_belief, encode_grid, robot_state};
+use crate::agent::sac::reward::Reward;
+use crate::belief::BeliefCrop;
+use crate::compose::StepParams;
+use crate::episode::{Episode, EpisodeEnd, EpisodeParams};
+use crate::nn::sac::{ACTION_LEN, Observations, PolicyWorkspace, STATE_LEN, SacNetworks};
+use crate::sense::LocalGrid;
+use bevy::prelude::*;
+use rand::Rng;
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::{Arc, Mutex, OnceLock};
+
+#[derive(Resource, Serialize, Deserialize, Clone, Debug, Default, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct SacPolicyParams {
+    /// A policy written by `apfn train-sac` (safetensors), relative to the working directory.
+    /// Unused while a learning agent is in the world (training acts with its live networks).
+    pub checkpoint: Option<String>,
+}
+
+impl StepParams for SacPolicyParams {
+    /// Loads the policy once per process, so a missing or broken file fails when the schedule
+    /// loads, naming it.
+    fn check(&self) -> Result<(), String> {
+        match &self.checkpoint {
+            Some(path) => shared_policy(path).map(|_| ()),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The networks in `path`, loaded once per process and shared by every world.
+pub fn shared_policy(path: &str) -> Result<Arc<SacNetworks>, String> {
+    static POLICIES: OnceLock<Mutex<HashMap<String, Arc<SacNetworks>>>> = OnceLock::new();
+    let mut policies = POLICIES.get_or_init(Mutex::default).lock().unwrap_or_else(|p| p.into_inner());
+    if let Some(policy) = policies.get(path) {
+        return Ok(policy.clone());
+    }
+    let policy = Arc::new(SacNetworks::load(Path::new(path)).map_err(|e| format!("checkpoint: {e}"))?);
+    policies.insert(path.to_string(), policy.clone());
+    Ok(policy)
+}
+
+/// Buffers kept across steps.
+#[derive(Default)]
+pub struct PolicyState {
+    loaded: Option<Arc<SacNetworks>>,
+    robots: Vec<Entity>,
+    belief_bytes: Vec<u8>,
+    grid_bytes: Vec<u8>,
+    states: Vec<f32>,
+    belief: Vec<f32>,
+    grid: Vec<f32>,
+    noise: Vec<f32>,
+    actions: Vec<f32>,
+    /// The replay ids of this step's observations (learning only).
+    obs_ids: Vec<u64>,
+    ws: PolicyWorkspace,
+    warned: bool,
+}
+
+type RobotView<'a> = (
+    Entity,
+    &'a BeliefCrop,
+    &'a LocalGrid,
+    &'a Collided,
+    &'a Episode,
+    Has<EpisodeEnd>,
+    &'a Reward,
+    &'a mut Action,
+);
+
+/// Reads BeliefCrop, LocalGrid, Collided, Episode, EpisodeEnd, Reward, the last Action, the
+/// learning agent (if any). Writes Action; with a learning agent, its replay buffer.
+pub fn sac_policy(
+    params: Res<SacPolicyParams>,
+    episode: Res<EpisodeParams>,
+    mut agents: Query<&mut SacAgent>,
+    mut robots: Query<RobotView>,
+    mut state: Local<PolicyState>,
+) {
+    let state = &mut *state;
+    let mut agent = agents.single_mut().ok();
+    if agent.is_none() && state.loaded.is_none() {
+        match params.checkpoint.as_deref().map(shared_policy) {
+            Some(Ok(policy)) => state.loaded = Some(policy),
+            Some(Err(e)) => return tracing::warn!("sac_policy: {e}"),
+            None => {
+                return tracing::warn!("sac_policy: no checkpoint and no learning agent; robots keep still");
+            }
+        }
+    }
+    state.robots.clear();
+    state.robots.extend(robots.iter().map(|r| r.0));
+    // A stable order, so batches (and random draws) do not depend on archetype layout.
+    state.robots.sort_unstable();
+    let n = state.robots.len();
+    let shape = {
+        let nets = agent
+            .as_ref()
+            .map_or_else(|| state.loaded.as_deref().expect("loaded above"), |a| &a.learner.nets);
+        ObservationShape::of(&nets.config)
+    };
+    let (bl, gl) = (shape.belief_len(), shape.grid_len());
+    state.belief_bytes.resize(n * bl, 0);
+    state.grid_bytes.resize(n * gl, 0);
+    state.states.resize(n * STATE_LEN, 0.0);
+    state.obs_ids.clear();
+    for (k, &robot) in state.robots.iter().enumerate() {
+        let (_, crop, grid, collided, ep, is_end, reward, action) = robots.get(robot).expect("listed above");
+        let encoded = encode_belief(crop, &shape, &mut state.belief_bytes[k * bl..(k + 1) * bl])
+            .and_then(|()| encode_grid(grid, &shape, &mut state.grid_bytes[k * gl..(k + 1) * gl]));
+        if let Err(e) = encoded {
+            if !state.warned {
+                tracing::error!("sac_policy: {e}");
+                state.warned = true;
+            }
+            return;
+        }
+        let s = robot_state(action, collided.0, ep, episode.steps);
+        state.states[k * STATE_LEN..(k + 1) * STATE_LEN].copy_from_slice(&s);
+        if let Some(agent) = agent.as_deref_mut() {
+            let (belief, grid) =
+                (&state.belief_bytes[k * bl..(k + 1) * bl], &state.grid_bytes[k * gl..(k + 1) * gl]);
+            state.obs_ids.push(store(agent, robot, belief, grid, &s, reward, is_end));
+        }
+    }
+
+    state.belief.resize(n * bl, 0.0);
+    state.grid.resize(n * gl, 0.0);
+    decode(&state.belief_bytes, &mut state.belief);
+    decode(&state.grid_bytes, &mut state.grid);
+    state.actions.resize(n * ACTION_LEN, 0.0);
+    let obs = Observations { n, belief: &state.belief, grid: &state.grid, state: &state.states };
+    match agent.as_deref_mut() {
+        Some(agent) if agent.warming_up() => {
+            state.actions.iter_mut().for_each(|a| *a = agent.rng.random_range(-1.0..=1.0));
+        }
+        Some(agent) => {
+            state.noise.clear();
+            state.noise.extend((0..n * ACTION_LEN).map(|_| agent.rng.sample::<f32, _>(StandardNormal)));
+            agent.learner.nets.act(&obs, Some(&state.noise), &mut state.ws, &mut state.actions);
+        }
+        None => {
+            state.loaded.as_ref().expect("loaded above").act(&obs, None, &mut state.ws, &mut state.actions)
+        }
+    }
+    for (k, &robot) in state.robots.iter().enumerate() {
+        let (.., is_end, _, mut action) = robots.get_mut(robot).expect("listed above");
+        let a = [state.actions[2 * k], state.actions[2 * k + 1]];
+        *action = Action::new(a[0], a[1]);
+        if let Some(agent) = agent.as_deref_mut()
+            && !is_end
+        {
+            // The observation just stored is the one this action was chosen on.
+            agent.pending.insert(robot, Pending { obs: state.obs_ids[k], action: a });
+        }
+    }
+}
+
+/// Stores a robot's observation and the transition its last action completes; returns the
+/// observation's id.
+fn store(
+    agent: &mut SacAgent,
+    robot: Entity,
+    belief: &[u8],
+    grid: &[u8],
+    s: &[f32; STATE_LEN],
+    reward: &Reward,
+    is_end: bool,
+) -> u64 {
+    let id = agent.replay.push_observation(belief, grid, s);
+    if let (Some(pending), Some(r)) = (agent.pending.remove(&robot), reward.0) {
+        agent.replay.push(pending.obs, pending.action, r, id, is_end);
+        agent.transitions += 1;
+        *agent.returns.entry(robot).or_default() += r;
+        if is_end {
+            let total = agent.returns.remove(&robot).unwrap_or(r);
+            agent.finished.push(EpisodeReturn { total, final_loss: -r });
+        }
+    }
+    id
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::agent::sac::SacAgentConfig;
+    use crate::nn::sac::{SacHyper, SacNetConfig};
+    use bevy::ecs::system::RunSystemOnce;
+
+    fn tiny() -> SacNetConfig {
+        SacNetConfig {
+            conv_channels: vec![2],
+            encoder_fc: 4,
+            mlp_width: 8,
+            belief_cells: 5,
+            belief_channels: 4,
+            grid_cells: 5,
+        }
+    }
+
+    /// One robot through a 3-step episode and into the next, with a learning agent.
+    #[test]
+    fn every_action_gets_its_reward_and_the_last_step_ends_the_episode() {
+        let mut world = World::new();
+        world.insert_resource(SacPolicyParams::default());
+        world.insert_resource(EpisodeParams { steps: 3, change_maps: false });
+        let config = SacAgentConfig { buffer: 10, batch: 1, learning_starts: 0, hyper: SacHyper::default() };
+        let agent = world.spawn(SacAgent::new(&tiny(), config, 1, 3, 7)).id();
+        let crop = BeliefCrop { cells: 5, centres: vec![], values: vec![0.5; 100] };
+        let grid = LocalGrid { cells: 5, values: vec![1.0; 25] };
+        let robot = world
+            .spawn((crop, grid, Collided(false), Episode::default(), Reward(None), Action::default()))
+            .id();
+        // (episode step, reward of the last action, last step?)
+        let frames = [
+            (1, None, false),
+            (2, Some(-0.5), false),
+            (3, Some(-0.25), true),
+            (1, None, false),
+            (2, Some(-1.0), false),
+        ];
+        for (step, reward, end) in frames {
+            let mut r = world.entity_mut(robot);
+            r.insert((Episode { index: 0, step }, Reward(reward)));
+            if end {
+                r.insert(EpisodeEnd);
+            } else {
+                r.remove::<EpisodeEnd>();
+            }
+            world.run_system_once(sac_policy).unwrap();
+            let a = *world.get::<Action>(robot).unwrap();
+            assert!(a.linear.abs() <= 1.0 && a.angular.abs() <= 1.0, "actions stay in [−1, 1]: {a:?}");
+        }
+        let agent = world.get::<SacAgent>(agent).unwrap();
+        assert_eq!(agent.transitions, 3, "two actions of episode 1 and the first of episode 2");
+        assert_eq!(agent.finished.len(), 1);
+        assert_eq!(agent.finished[0].total, -0.75, "the last action's reward counts");
+        assert_eq!(agent.finished[0].final_loss, 0.25);
+        let mut batch = crate::agent::sac::SampledBatch::default();
+        agent.replay.sample(&[0, 1, 2], &mut batch);
+        let t = batch.transitions();
+        assert_eq!(t.rewards, &[-0.5, -0.25, -1.0]);
+        assert_eq!(t.dones, &[0.0, 1.0, 0.0], "the episode ends with its last step");
+        assert_eq!(t.next_obs.state[4 + 3], 0.0, "no action left after the last step");
+        assert!(agent.pending.contains_key(&robot), "the newest action waits for its reward");
+    }
+
+    #[test]
+    fn a_checkpoint_policy_acts_deterministically_and_a_bad_path_is_named() {
+        let nets = SacNetworks::new(&tiny(), 3);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("policy.safetensors");
+        nets.save(&path).unwrap();
+        let params = SacPolicyParams { checkpoint: Some(path.display().to_string()) };
+        assert_eq!(params.check(), Ok(()));
+        let run = || {
+            let mut world = World::new();
+            world.insert_resource(params.clone());
+            world.insert_resource(EpisodeParams::default());
+            let crop = BeliefCrop {
+                cells: 5,
+                centres: vec![],
+                values: (0..100).map(|i| (i % 7) as f32 / 7.0).collect(),
+            };
+            let grid = LocalGrid { cells: 5, values: vec![0.5; 25] };
+            let robot = world
+                .spawn((crop, grid, Collided(false), Episode::default(), Reward(None), Action::default()))
+                .id();
+            world.run_system_once(sac_policy).unwrap();
+            *world.get::<Action>(robot).unwrap()
+        };
+        assert_eq!(run(), run(), "evaluation actions are tanh(μ), no noise");
+        let missing = SacPolicyParams { checkpoint: Some("no/such/policy.safetensors".into()) };
+        assert!(missing.check().unwrap_err().contains("no/such/policy.safetensors"));
+    }
+}

@@ -1,0 +1,91 @@
+//! The agent's reward (paper, eq. 6): minus the squared pose error of the filter's estimate after
+//! this step's update, r = −(Δx² + Δy² + 0.36 Δθ²) in m² and rad², and −0.1 when the robot
+//! touched anything while executing the action.
+
+use crate::act::Collided;
+use crate::compose::{StepParams, expect_param};
+use crate::episode::EpisodeStart;
+use crate::particles::PoseEstimate;
+use crate::world::{TruePose, angle_error};
+use bevy::prelude::*;
+use serde::{Deserialize, Serialize};
+
+#[derive(Resource, Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct RewardParams {
+    /// Weight of the squared heading error, per rad² (paper: 0.36).
+    pub heading_weight: f32,
+    /// Subtracted when the robot touched anything during the step (paper: 0.1).
+    pub collision_penalty: f32,
+}
+
+impl Default for RewardParams {
+    fn default() -> Self {
+        Self { heading_weight: 0.36, collision_penalty: 0.1 }
+    }
+}
+
+impl StepParams for RewardParams {
+    fn check(&self) -> Result<(), String> {
+        expect_param(self.heading_weight >= 0.0, "heading_weight", "≥ 0")?;
+        expect_param(self.collision_penalty >= 0.0, "collision_penalty", "≥ 0 (it is subtracted)")
+    }
+}
+
+/// The reward of the action the robot took in the previous step; `None` in the first step of
+/// an episode, which follows no action of its own.
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct Reward(pub Option<f32>);
+
+/// r for an estimate against the truth.
+pub fn reward(estimate: &PoseEstimate, truth: &TruePose, collided: bool, params: &RewardParams) -> f32 {
+    let (e, t) = (estimate.pose, truth.0);
+    let (dx, dy, dyaw) = (e.x - t.x, e.y - t.y, angle_error(e.yaw, t.yaw));
+    let penalty = if collided { params.collision_penalty } else { 0.0 };
+    -(dx * dx + dy * dy + params.heading_weight * dyaw * dyaw) - penalty
+}
+
+/// Reads PoseEstimate, TruePose, Collided, EpisodeStart, RewardParams. Writes Reward.
+pub fn localization_reward(
+    params: Res<RewardParams>,
+    mut robots: Query<(&PoseEstimate, &TruePose, &Collided, Has<EpisodeStart>, &mut Reward)>,
+) {
+    for (estimate, truth, collided, starting, mut r) in &mut robots {
+        r.0 = (!starting).then(|| reward(estimate, truth, collided.0, &params));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::Pose2;
+    use bevy::ecs::system::RunSystemOnce;
+
+    #[test]
+    fn reward_is_minus_the_weighted_squared_error_and_the_bump() {
+        let truth = TruePose(Pose2::new(1.0, 2.0, 0.1));
+        let estimate = PoseEstimate { pose: Pose2::new(1.3, 1.6, 0.6), ..Default::default() };
+        let want = -(0.09 + 0.16 + 0.36 * 0.25);
+        let params = RewardParams::default();
+        assert!((reward(&estimate, &truth, false, &params) - want).abs() < 1e-5);
+        assert!((reward(&estimate, &truth, true, &params) - (want - 0.1)).abs() < 1e-5);
+        let wrapped = PoseEstimate {
+            pose: Pose2::new(1.0, 2.0, 0.1 + 2.0 * std::f32::consts::PI),
+            ..Default::default()
+        };
+        assert!(reward(&wrapped, &truth, false, &params).abs() < 1e-5, "headings wrap");
+    }
+
+    #[test]
+    fn the_first_step_of_an_episode_has_no_reward() {
+        let mut world = World::new();
+        world.insert_resource(RewardParams::default());
+        let pose = Pose2::new(0.0, 0.0, 0.0);
+        let estimate = PoseEstimate { pose, ..Default::default() };
+        let parts = (estimate, TruePose(pose), Collided(true), Reward(Some(-5.0)));
+        let (fresh, going) = (world.spawn((parts, EpisodeStart)).id(), world.spawn(parts).id());
+        world.run_system_once(localization_reward).unwrap();
+        assert_eq!(world.get::<Reward>(fresh), Some(&Reward(None)));
+        assert_eq!(world.get::<Reward>(going), Some(&Reward(Some(-0.1))));
+    }
+}

@@ -1,0 +1,191 @@
+//! `apfn train-sac --config FILE.ron --out DIR [--resume]`: the APFN agent's training, with a
+//! progress bar (return, pose loss, steps/s), `train_log.csv`, `train_curves.png`, the latest
+//! policy (`policy.safetensors`, small) and the resumable state (`state.safetensors` with the
+//! replay buffer beside it), all written atomically.
+
+use crate::cli::set_threads;
+use crate::compose::read_ron;
+use crate::train::curves::{CurveLabels, curves_png};
+use crate::train::sac::{SacTrainer, TrainSacConfig};
+use crate::world::map::write_atomically;
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(clap::Args, Clone, Debug, PartialEq)]
+pub struct TrainSacArgs {
+    /// Training config (RON, a `TrainSacConfig`).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Folder for the policy, the state, the log and the curves (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Continue from `<out>/state.safetensors` (the config must be the one it was trained with).
+    #[arg(long)]
+    pub resume: bool,
+    /// Worker threads (default: all cores); the same seed and thread count give the same bytes.
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// One line of `train_log.csv`: means over the world steps since the previous line.
+#[derive(Serialize, Deserialize, Clone, Debug, Default, PartialEq)]
+pub struct LogRow {
+    pub step: u64,
+    pub transitions: u64,
+    pub updates: u64,
+    pub episodes: u64,
+    /// Mean return of the episodes that ended.
+    pub episode_return: f64,
+    /// Mean squared pose error (m² + 0.36 rad², plus any bump) at those episodes' last step.
+    pub final_loss: f64,
+    pub critic_loss: f64,
+    pub actor_loss: f64,
+    pub alpha: f64,
+    pub entropy: f64,
+    pub q: f64,
+    pub steps_per_s: f64,
+    /// Wall-clock seconds of this process when the row was written.
+    pub wall_s: f64,
+}
+
+pub fn run(args: TrainSacArgs) -> anyhow::Result<()> {
+    set_threads(args.threads)?;
+    let config: TrainSacConfig = read_ron(&args.config)?;
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let log_path = args.out.join("train_log.csv");
+    let mut trainer = if args.resume {
+        SacTrainer::resume(config, &args.config, &args.out)?
+    } else {
+        SacTrainer::new(config, &args.config)?
+    };
+    let mut rows: Vec<LogRow> = if args.resume { read_log(&log_path)? } else { vec![] };
+    rows.retain(|r| r.step <= trainer.step);
+    let replay_mb = trainer.agent().replay.memory_bytes() as f64 / 1e6;
+    println!(
+        "training {} SAC from step {} to {}; replay buffer of {} transitions holds {replay_mb:.0} MB",
+        trainer.config.network, trainer.step, trainer.config.steps, trainer.config.agent.buffer
+    );
+
+    let started = Instant::now();
+    let bar = ProgressBar::new(trainer.config.steps).with_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} steps {per_sec} {msg} eta {eta}")
+            .expect("static template"),
+    );
+    bar.set_position(trainer.step);
+    let mut last_log = (Instant::now(), trainer.step);
+    let mut window = Window::default();
+    while trainer.step < trainer.config.steps {
+        trainer.step();
+        window.drain(&mut trainer);
+        bar.set_position(trainer.step);
+        if trainer.step % trainer.config.log_every == 0 || trainer.step == trainer.config.steps {
+            let row = window.row(&trainer, last_log, started.elapsed().as_secs_f64());
+            anyhow::ensure!(
+                row.critic_loss.is_finite(),
+                "training diverged at step {}: critic loss {}",
+                row.step,
+                row.critic_loss
+            );
+            bar.set_message(format!("return {:.2}, final loss {:.3}", row.episode_return, row.final_loss));
+            rows.push(row);
+            last_log = (Instant::now(), trainer.step);
+            window = Window::default();
+        }
+        if trainer.checkpoint_due() {
+            trainer.save_state(&args.out)?;
+            trainer.agent().learner.nets.save(&args.out.join("policy.safetensors"))?;
+            write_log(&log_path, &rows)?;
+            write_curves(&args.out, &rows, &trainer.config.network)?;
+        }
+    }
+    bar.finish_and_clear();
+    println!(
+        "trained to step {} ({} transitions, {} updates) in {:.1} s; wrote {}/policy.safetensors, state.safetensors, train_log.csv",
+        trainer.step,
+        trainer.agent().transitions,
+        trainer.agent().updates,
+        started.elapsed().as_secs_f64(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// What the agent reported since the last log row.
+#[derive(Default)]
+struct Window {
+    episodes: Vec<(f32, f32)>,
+    stats: Vec<crate::nn::sac::UpdateStats>,
+}
+
+impl Window {
+    fn drain(&mut self, trainer: &mut SacTrainer) {
+        let mut agent = trainer.agent_mut();
+        self.episodes.extend(agent.finished.drain(..).map(|e| (e.total, e.final_loss)));
+        self.stats.append(&mut agent.stats);
+    }
+
+    fn row(&self, trainer: &SacTrainer, (since, from): (Instant, u64), wall_s: f64) -> LogRow {
+        let mean = |v: &mut dyn Iterator<Item = f32>| {
+            let (sum, n) = v.fold((0.0f64, 0usize), |(s, n), x| (s + f64::from(x), n + 1));
+            if n == 0 { f64::NAN } else { sum / n as f64 }
+        };
+        let s = &self.stats;
+        let agent = trainer.agent();
+        LogRow {
+            step: trainer.step,
+            transitions: agent.transitions,
+            updates: agent.updates,
+            episodes: self.episodes.len() as u64,
+            episode_return: mean(&mut self.episodes.iter().map(|e| e.0)),
+            final_loss: mean(&mut self.episodes.iter().map(|e| e.1)),
+            critic_loss: if s.is_empty() { 0.0 } else { mean(&mut s.iter().map(|u| u.critic_loss)) },
+            actor_loss: mean(&mut s.iter().map(|u| u.actor_loss)),
+            alpha: f64::from(agent.learner.alpha()),
+            entropy: mean(&mut s.iter().map(|u| u.entropy)),
+            q: mean(&mut s.iter().map(|u| u.q)),
+            steps_per_s: (trainer.step - from) as f64 / since.elapsed().as_secs_f64().max(1e-9),
+            wall_s,
+        }
+    }
+}
+
+fn write_curves(out: &Path, rows: &[LogRow], network: &str) -> anyhow::Result<()> {
+    let points: Vec<_> = rows
+        .iter()
+        .filter(|r| r.episodes > 0)
+        .map(|r| (r.transitions, -r.episode_return / 50.0, r.final_loss))
+        .collect();
+    let labels = CurveLabels {
+        x: "transitions",
+        y: "pose loss (m² + 0.36 rad²)",
+        series: ["mean per step", "at the last step"],
+    };
+    write_atomically(
+        &out.join("train_curves.png"),
+        &curves_png(&points, &format!("APFN agent, {network} SAC"), &labels)?,
+    )?;
+    Ok(())
+}
+
+fn read_log(path: &Path) -> anyhow::Result<Vec<LogRow>> {
+    if !path.exists() {
+        return Ok(vec![]);
+    }
+    let mut reader = csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
+    reader
+        .deserialize()
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("{}: not a training log", path.display()))
+}
+
+fn write_log(path: &Path, rows: &[LogRow]) -> anyhow::Result<()> {
+    let mut writer = csv::Writer::from_writer(vec![]);
+    for row in rows {
+        writer.serialize(row)?;
+    }
+    write_atomically(path, &writer.into_inner()?)?;
+    Ok(())
+}

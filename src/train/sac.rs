@@ -1,0 +1,219 @@
+//! SAC training: every robot of one world collects with the live policy (one batched forward
+//! for all of them, inside `sac_policy`), `sac_update` takes gradient steps between world steps,
+//! and this loop only adds what a run needs around the schedule: fresh random streams at each
+//! episode boundary, checkpoints and exact resume.
+//!
+//! Exact resume: all robots start and end their episodes together, so at an episode boundary no
+//! action waits for its reward and no robot carries anything into the next episode but its map.
+//! There every robot's random streams and the agent's are re-seeded from (seed, robot, episode),
+//! and the state saved (networks, optimizers, replay buffer, counters) is all a resumed run needs
+//! to continue exactly as the uninterrupted one.
+
+use crate::agent::sac::{SacAgent, SacAgentConfig};
+use crate::compose::{LoadedScene, Pipeline, Scene, standard_registry};
+use crate::episode::Episode;
+use crate::nn::checkpoint::Checkpoint;
+use crate::nn::sac::{SacLearner, SacNetConfig};
+use crate::plugin::headless_app;
+use crate::world::rng::stream;
+use crate::world::{EpisodeRng, ScenarioRng};
+use anyhow::Context;
+use bevy::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// A training run (RON); paths are relative to the config file.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TrainSacConfig {
+    /// Maps, robots and episode length.
+    pub scene: PathBuf,
+    /// A schedule with `localization_reward`, `sac_policy` and `sac_update`.
+    pub systems: PathBuf,
+    /// `paper` or `compact`.
+    pub network: String,
+    #[serde(default)]
+    pub agent: SacAgentConfig,
+    /// World steps to train for (each moves every robot once).
+    pub steps: u64,
+    /// World steps between resumable checkpoints; a multiple of the episode length.
+    pub checkpoint_every: u64,
+    /// World steps between rows of the training log.
+    pub log_every: u64,
+    pub seed: u64,
+}
+
+impl TrainSacConfig {
+    pub fn net_config(&self) -> Result<SacNetConfig, String> {
+        match self.network.as_str() {
+            "paper" => Ok(SacNetConfig::paper()),
+            "compact" => Ok(SacNetConfig::compact()),
+            other => Err(format!("network: expected `paper` or `compact`, found `{other}`")),
+        }
+    }
+
+    pub fn check(&self) -> Result<(), String> {
+        self.net_config()?;
+        self.agent.check().map_err(|e| format!("agent.{e}"))?;
+        let positive = |v: u64, field: &str| {
+            if v > 0 { Ok(()) } else { Err(format!("{field}: expected ≥ 1 world step")) }
+        };
+        positive(self.steps, "steps")?;
+        positive(self.checkpoint_every, "checkpoint_every")?;
+        positive(self.log_every, "log_every")
+    }
+}
+
+/// Names of the files of a run's resumable state.
+pub const STATE_FILE: &str = "state.safetensors";
+
+/// The replay buffer saved with the state of step `step` (named by step, so that the state file
+/// never points at a buffer written for another step, even if a run dies between the two writes).
+pub fn replay_file(step: u64) -> String {
+    format!("replay_{step}.safetensors")
+}
+const STEP_KEY: &str = "train_step";
+const CONFIG_KEY: &str = "train_config";
+const COUNTS_KEY: &str = "agent_counts";
+
+/// A world with the learning agent in it.
+pub struct SacTrainer {
+    pub config: TrainSacConfig,
+    pub app: App,
+    robots: Vec<Entity>,
+    agent: Entity,
+    episode_steps: u64,
+    /// World steps done.
+    pub step: u64,
+}
+
+impl SacTrainer {
+    /// A fresh run of the config at `path`.
+    pub fn new(config: TrainSacConfig, path: &Path) -> anyhow::Result<Self> {
+        config.check().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let loaded: LoadedScene = Scene::load(&dir.join(&config.scene))?;
+        let pipeline = Pipeline::load(&dir.join(&config.systems), &standard_registry())?;
+        for needed in ["localization_reward", "sac_policy", "sac_update"] {
+            anyhow::ensure!(
+                pipeline.names().contains(&needed),
+                "{}: the schedule {} has no `{needed}` step",
+                path.display(),
+                config.systems.display()
+            );
+        }
+        let episode_steps = u64::from(loaded.scene.episode.steps);
+        anyhow::ensure!(
+            config.checkpoint_every.is_multiple_of(episode_steps),
+            "{}: checkpoint_every: expected a multiple of the episode length ({episode_steps} steps), got {}",
+            path.display(),
+            config.checkpoint_every
+        );
+        let (mut app, robots) = headless_app(&loaded, pipeline)?;
+        let net = config.net_config().map_err(anyhow::Error::msg)?;
+        let agent =
+            SacAgent::new(&net, config.agent.clone(), robots.len(), episode_steps as usize, config.seed);
+        let agent = app.world_mut().spawn(agent).id();
+        Ok(Self { config, app, robots, agent, episode_steps, step: 0 })
+    }
+
+    /// The run saved in `dir`, ready to continue.
+    pub fn resume(config: TrainSacConfig, path: &Path, dir: &Path) -> anyhow::Result<Self> {
+        let mut trainer = Self::new(config, path)?;
+        let state = dir.join(STATE_FILE);
+        let file = Checkpoint::load(&state)?;
+        let saved = file.metadata.get(CONFIG_KEY).map(String::as_str).unwrap_or_default();
+        anyhow::ensure!(
+            ron::from_str::<TrainSacConfig>(saved).ok().as_ref() == Some(&trainer.config),
+            "--resume: {} was trained with another config than {}",
+            state.display(),
+            path.display()
+        );
+        let number = |key: &str| -> anyhow::Result<Vec<u64>> {
+            let text = file
+                .metadata
+                .get(key)
+                .with_context(|| format!("{}: metadata `{key}` missing", state.display()))?;
+            ron::from_str(text).with_context(|| format!("{}: metadata `{key}`", state.display()))
+        };
+        let step = number(STEP_KEY)?[0];
+        let counts = number(COUNTS_KEY)?;
+        let learner = SacLearner::from_checkpoint(&file)?;
+        let mut agent = trainer.agent_mut();
+        agent.replay = crate::agent::sac::ReplayBuffer::load(&dir.join(replay_file(step)), &agent.replay)?;
+        agent.learner = learner;
+        (agent.transitions, agent.updates, agent.steps) = (counts[0], counts[1], counts[2]);
+        trainer.step = step;
+        if step > 0 {
+            // Every robot is in the last step of the episode before the boundary, as it was.
+            let episode = (step / trainer.episode_steps) as u32;
+            for &robot in &trainer.robots {
+                let steps = trainer.episode_steps as u32;
+                trainer.app.world_mut().entity_mut(robot).insert(Episode { index: episode - 1, step: steps });
+            }
+        }
+        Ok(trainer)
+    }
+
+    pub fn agent(&self) -> &SacAgent {
+        self.app.world().get::<SacAgent>(self.agent).expect("the agent entity lives as long as the trainer")
+    }
+
+    pub fn agent_mut(&mut self) -> Mut<'_, SacAgent> {
+        self.app
+            .world_mut()
+            .get_mut::<SacAgent>(self.agent)
+            .expect("the agent entity lives as long as the trainer")
+    }
+
+    /// One world step; at an episode boundary, fresh random streams first.
+    pub fn step(&mut self) {
+        if self.step.is_multiple_of(self.episode_steps) {
+            let (seed, episode) = (self.config.seed, self.step / self.episode_steps);
+            for (index, &robot) in self.robots.iter().enumerate() {
+                let key = [seed, index as u64, episode];
+                let mut entity = self.app.world_mut().entity_mut(robot);
+                entity.insert((
+                    ScenarioRng(stream(&[key[0], key[1], key[2], 1])),
+                    EpisodeRng(stream(&[key[0], key[1], key[2], 2])),
+                ));
+            }
+            self.agent_mut().rng = stream(&[seed, 0x5ac, episode]);
+        }
+        self.app.update();
+        self.step += 1;
+    }
+
+    /// Whether a resumable checkpoint is due after this step.
+    pub fn checkpoint_due(&self) -> bool {
+        self.step.is_multiple_of(self.config.checkpoint_every) || self.step == self.config.steps
+    }
+
+    /// Writes the resumable state (learner, replay buffer, counters) into `dir`, atomically per file.
+    pub fn save_state(&self, dir: &Path) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.step.is_multiple_of(self.episode_steps),
+            "state is saved at episode boundaries only"
+        );
+        let agent = self.agent();
+        let mut extra = BTreeMap::new();
+        extra.insert(STEP_KEY.into(), format!("[{}]", self.step));
+        extra.insert(
+            COUNTS_KEY.into(),
+            format!("[{}, {}, {}]", agent.transitions, agent.updates, agent.steps),
+        );
+        extra.insert(CONFIG_KEY.into(), ron::to_string(&self.config)?);
+        // The buffer first, then the state naming it, then the buffers no state names any more.
+        agent.replay.save(&dir.join(replay_file(self.step)))?;
+        agent.learner.to_checkpoint(extra).save(&dir.join(STATE_FILE))?;
+        for entry in std::fs::read_dir(dir)?.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if name.starts_with("replay_") && name.ends_with(".safetensors") && name != replay_file(self.step)
+            {
+                std::fs::remove_file(entry.path())?;
+            }
+        }
+        Ok(())
+    }
+}
