@@ -10,6 +10,7 @@ pub mod run;
 pub mod sweep;
 pub mod systems;
 pub mod train_pfnet;
+pub mod sac;
 pub mod train_sac;
 
 use clap::{Parser, Subcommand};
@@ -44,6 +45,9 @@ pub enum Command {
     Collect(collect::CollectArgs),
     /// Train PF-net on simulated episodes (supervised, as the paper), with checkpoints and resume.
     TrainPfnet(train_pfnet::TrainPfNetArgs),
+    /// The APFN agent's networks: size and the speed of one SAC update.
+    #[command(subcommand)]
+    Sac(sac::SacCommand),
     /// Train the APFN agent (SAC) with the filter in the loop; checkpoints, log, curves, --resume.
     TrainSac(train_sac::TrainSacArgs),
     /// List the registered systems with their parameters.
@@ -64,6 +68,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Systems(cmd) => systems::run(cmd),
         Command::TrainPfnet(args) => train_pfnet::run(args),
         Command::TrainSac(args) => train_sac::run(args),
+        Command::Sac(command) => sac::run(command),
         Command::Collect(args) => collect::run(args),
     }
 }

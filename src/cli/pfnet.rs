@@ -174,7 +174,7 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
 }
 
 /// Seconds per call of `f`, after two untimed calls that size every buffer.
-fn time(reps: usize, mut f: impl FnMut()) -> Vec<f64> {
+pub(crate) fn time(reps: usize, mut f: impl FnMut()) -> Vec<f64> {
     f();
     f();
     (0..reps)
@@ -186,12 +186,12 @@ fn time(reps: usize, mut f: impl FnMut()) -> Vec<f64> {
         .collect()
 }
 
-fn median(mut xs: Vec<f64>) -> f64 {
+pub(crate) fn median(mut xs: Vec<f64>) -> f64 {
     xs.sort_by(f64::total_cmp);
     xs[xs.len() / 2]
 }
 
-fn round(x: f64) -> f64 {
+pub(crate) fn round(x: f64) -> f64 {
     (x * 100.0).round() / 100.0
 }
 

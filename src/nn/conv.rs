@@ -96,10 +96,11 @@ impl Conv2d {
         Geometry { h, w, oh, ow, pad_top, pad_left }
     }
 
-    /// Calls `f(col, x, len)` for every run of in-bounds taps of one sample: `cols[col + j]` reads
-    /// `x_n[x + j·stride]` for `j < len`. Taps not visited fall in the padding (zero).
-    fn for_each_run(&self, g: &Geometry, mut f: impl FnMut(usize, usize, usize)) {
-        let (k, s, d, p) = (self.kernel, self.stride, self.dilation, g.pixels());
+    /// Calls `f(tap, pixel, x, len)` for every run of in-bounds taps of one sample: row `tap` of
+    /// the im2col matrix at output pixels `pixel + j` reads `x_n[x + j·stride]` for `j < len`.
+    /// Taps not visited fall in the padding (zero).
+    fn for_each_run(&self, g: &Geometry, mut f: impl FnMut(usize, usize, usize, usize)) {
+        let (k, s, d) = (self.kernel, self.stride, self.dilation);
         for c in 0..self.c_in {
             for ki in 0..k {
                 let (oy_lo, oy_hi) = valid_range(g.oh, g.h, (ki * d) as isize - g.pad_top as isize, s);
@@ -108,11 +109,11 @@ impl Conv2d {
                     if ox_lo == ox_hi {
                         continue;
                     }
-                    let row = ((c * k + ki) * k + kj) * p;
+                    let tap = (c * k + ki) * k + kj;
                     let ix = ox_lo * s + kj * d - g.pad_left;
                     for oy in oy_lo..oy_hi {
                         let iy = oy * s + ki * d - g.pad_top;
-                        f(row + oy * g.ow + ox_lo, (c * g.h + iy) * g.w + ix, ox_hi - ox_lo);
+                        f(tap, oy * g.ow + ox_lo, (c * g.h + iy) * g.w + ix, ox_hi - ox_lo);
                     }
                 }
             }
@@ -126,15 +127,13 @@ impl Conv2d {
         for row in cols.chunks_exact_mut(stride) {
             row[i * p..(i + 1) * p].fill(0.0);
         }
-        self.for_each_run(g, |col, x, len| {
-            let at = (col / p) * stride + i * p + col % p;
+        self.for_each_run(g, |tap, pixel, x, len| {
+            let at = tap * stride + i * p + pixel;
             let dst = &mut cols[at..at + len];
-            if s == 1 {
-                dst.copy_from_slice(&x_n[x..x + len]);
-            } else {
-                for (d, v) in dst.iter_mut().zip(x_n[x..].iter().step_by(s)) {
-                    *d = *v;
-                }
+            // Bounded source slice: the strided gather compiles without per-element checks.
+            let src = &x_n[x..x + (len - 1) * s + 1];
+            for (j, d) in dst.iter_mut().enumerate() {
+                *d = src[j * s];
             }
         });
     }
@@ -142,17 +141,12 @@ impl Conv2d {
     /// dx_n [c_in][h][w] += scatter of sample `i`'s columns of dcols [K × stride] (the adjoint of `im2col`).
     fn col2im(&self, g: &Geometry, dcols: &[f32], (stride, i): (usize, usize), dx_n: &mut [f32]) {
         let (s, p) = (self.stride, g.pixels());
-        self.for_each_run(g, |col, x, len| {
-            let at = (col / p) * stride + i * p + col % p;
+        self.for_each_run(g, |tap, pixel, x, len| {
+            let at = tap * stride + i * p + pixel;
             let src = &dcols[at..at + len];
-            if s == 1 {
-                for (d, v) in dx_n[x..x + len].iter_mut().zip(src) {
-                    *d += *v;
-                }
-            } else {
-                for (d, v) in dx_n[x..].iter_mut().step_by(s).zip(src) {
-                    *d += *v;
-                }
+            let dst = &mut dx_n[x..x + (len - 1) * s + 1];
+            for (j, v) in src.iter().enumerate() {
+                dst[j * s] += *v;
             }
         });
     }
