@@ -7,10 +7,10 @@ pub mod map;
 pub mod pfnet;
 pub mod record;
 pub mod run;
+pub mod sac;
 pub mod sweep;
 pub mod systems;
 pub mod train_pfnet;
-pub mod sac;
 pub mod train_sac;
 
 use clap::{Parser, Subcommand};

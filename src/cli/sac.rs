@@ -3,7 +3,9 @@
 
 use crate::cli::pfnet::{median, peak_rss_mb, round, time};
 use crate::cli::set_threads;
-use crate::nn::sac::{ACTION_LEN, Observations, STATE_LEN, SacHyper, SacLearner, SacNetConfig, SacNetworks, Transitions};
+use crate::nn::sac::{
+    ACTION_LEN, Observations, STATE_LEN, SacHyper, SacLearner, SacNetConfig, SacNetworks, Transitions,
+};
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 use rand_pcg::Pcg64Mcg;
@@ -73,8 +75,10 @@ fn bench(config: &str, n: usize, reps: usize, threads: Option<usize>) -> anyhow:
     let states = [uniform(n * STATE_LEN, 0.0), uniform(n * STATE_LEN, 0.0)];
     let (actions, rewards, dones) = (uniform(n * ACTION_LEN, -1.0), uniform(n, -1.0), vec![0.0; n]);
     let noise: Vec<f32> = (0..2 * n * ACTION_LEN).map(|_| rng.sample(StandardNormal)).collect();
-    let obs = |i: usize| Observations { n, belief: &images[2 * i], grid: &images[2 * i + 1], state: &states[i] };
-    let batch = Transitions { obs: obs(0), actions: &actions, rewards: &rewards, dones: &dones, next_obs: obs(1) };
+    let obs =
+        |i: usize| Observations { n, belief: &images[2 * i], grid: &images[2 * i + 1], state: &states[i] };
+    let batch =
+        Transitions { obs: obs(0), actions: &actions, rewards: &rewards, dones: &dones, next_obs: obs(1) };
     let timings = time(reps, || {
         learner.update(&batch, &noise);
     });

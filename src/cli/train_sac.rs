@@ -98,7 +98,7 @@ pub fn run(args: TrainSacArgs) -> anyhow::Result<()> {
             trainer.save_state(&args.out)?;
             trainer.agent().learner.nets.save(&args.out.join("policy.safetensors"))?;
             write_log(&log_path, &rows)?;
-            write_curves(&args.out, &rows, &trainer.config.network)?;
+            write_curves(&args.out, &rows, &trainer)?;
         }
     }
     bar.finish_and_clear();
@@ -152,21 +152,27 @@ impl Window {
     }
 }
 
-fn write_curves(out: &Path, rows: &[LogRow], network: &str) -> anyhow::Result<()> {
-    let points: Vec<_> = rows
-        .iter()
-        .filter(|r| r.episodes > 0)
-        .map(|r| (r.transitions, -r.episode_return / 50.0, r.final_loss))
+/// `train_curves.png`: the episodes' pose loss per rewarded step and at their last step, each a
+/// trailing mean over `SMOOTH` log rows (one row averages only a handful of episodes).
+fn write_curves(out: &Path, rows: &[LogRow], trainer: &SacTrainer) -> anyhow::Result<()> {
+    const SMOOTH: usize = 10;
+    let rewarded = trainer.episode_steps().saturating_sub(1).max(1) as f64;
+    let rows: Vec<&LogRow> = rows.iter().filter(|r| r.episodes > 0).collect();
+    let points: Vec<_> = (0..rows.len())
+        .map(|i| {
+            let window = &rows[i.saturating_sub(SMOOTH - 1)..=i];
+            let mean =
+                |f: &dyn Fn(&LogRow) -> f64| window.iter().map(|r| f(r)).sum::<f64>() / window.len() as f64;
+            (rows[i].transitions, mean(&|r| -r.episode_return / rewarded), mean(&|r| r.final_loss))
+        })
         .collect();
     let labels = CurveLabels {
         x: "transitions",
-        y: "pose loss (m² + 0.36 rad²)",
-        series: ["mean per step", "at the last step"],
+        y: "pose loss, m2 + 0.36 rad2",
+        series: ["per rewarded step", "at the episode's last step"],
     };
-    write_atomically(
-        &out.join("train_curves.png"),
-        &curves_png(&points, &format!("APFN agent, {network} SAC"), &labels)?,
-    )?;
+    let title = format!("APFN agent, {} SAC (trailing mean of {SMOOTH} logs)", trainer.config.network);
+    write_atomically(&out.join("train_curves.png"), &curves_png(&points, &title, &labels)?)?;
     Ok(())
 }
 

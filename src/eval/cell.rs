@@ -61,13 +61,14 @@ pub fn cell_steps(eval: &LoadedEval, cell: &CellSpec) -> u64 {
 
 /// The localizer and policy a schedule runs, for the table: the Particles-stage step that
 /// weighs particles against a sensor (`mcl` for the likelihood field, `mcl_beam` for the beam
-/// model, `pfnet` for PF-net), and the Agent-stage policy, without its `_policy` suffix.
+/// model, `pfnet` for PF-net), and the Agent-stage policy, without its `_policy` suffix (the SAC
+/// agent's rows are `apfn`, the paper's name for it).
 pub fn labels(pipeline: &Pipeline) -> (String, String) {
-    let policy = pipeline
-        .steps
-        .iter()
-        .find(|s| s.stage == ApfnSet::Agent)
-        .map_or("none".into(), |s| s.name.trim_end_matches("_policy").to_owned());
+    let policy =
+        pipeline.steps.iter().find(|s| s.stage == ApfnSet::Agent).map_or("none".into(), |s| match s.name {
+            "sac_policy" => "apfn".into(),
+            name => name.trim_end_matches("_policy").to_owned(),
+        });
     let is_likelihood = |n: &&&str| {
         [ObservationModel::LikelihoodField, ObservationModel::BeamModel, ObservationModel::PfNet]
             .iter()

@@ -156,6 +156,11 @@ impl SacTrainer {
         Ok(trainer)
     }
 
+    /// Agent steps per episode.
+    pub fn episode_steps(&self) -> u64 {
+        self.episode_steps
+    }
+
     pub fn agent(&self) -> &SacAgent {
         self.app.world().get::<SacAgent>(self.agent).expect("the agent entity lives as long as the trainer")
     }
