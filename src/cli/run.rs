@@ -4,7 +4,9 @@
 use crate::act::Collided;
 use crate::agent::Action;
 use crate::cli::set_threads;
-use crate::compose::{ComposeError, LoadedScene, MapName, Pipeline, Scene, standard_registry};
+use crate::compose::{
+    ComposeError, LoadedScene, MapName, Pipeline, Scene, relative_to_file, standard_registry,
+};
 use crate::episode::Episode;
 use crate::particles::{ParticleSet, PoseEstimate};
 use crate::plugin::headless_app;
@@ -187,10 +189,9 @@ pub fn load_scene(path: Option<&Path>) -> anyhow::Result<LoadedScene> {
 /// The schedule from `path`, else the scene's own (relative to the scene file), else the default.
 pub fn load_pipeline(path: Option<&Path>, scene: &LoadedScene) -> anyhow::Result<Pipeline> {
     let registry = standard_registry();
-    let scene_dir = scene.path.parent().unwrap_or(Path::new("."));
     Ok(match (path, &scene.scene.systems) {
         (Some(path), _) => Pipeline::load(path, &registry)?,
-        (None, Some(relative)) => Pipeline::load(&scene_dir.join(relative), &registry)?,
+        (None, Some(relative)) => Pipeline::load(&relative_to_file(&scene.path, relative), &registry)?,
         (None, None) => Pipeline::parse(DEFAULT_SYSTEMS.1, Path::new(DEFAULT_SYSTEMS.0), &registry)?,
     })
 }
