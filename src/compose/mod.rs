@@ -14,6 +14,7 @@ pub use error::{ComposeError, read_ron, read_text};
 pub use paths::{relative_to_file, tidy};
 pub use registry::{
     ConfiguredSystem, NoParams, RegisteredSystem, Registry, StepParams, StepSlot, SystemSpec, expect_param,
+    pretty_ron,
 };
 pub use scene::{LoadedScene, MapSource, NamedMap, Scene, some_path};
 pub use schedule::{Pipeline, PipelineStep};
