@@ -144,13 +144,18 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         robot_steps_per_s: (args.steps * args.worlds) as f64 * robots_per_world as f64 / seconds,
         localization: summarize(&episodes),
     };
+    let robots = match summary.maps {
+        1 => format!("{} on 1 map", count(summary.robots as u64, "robot")),
+        maps => format!(
+            "{} ({} on each of {maps} maps)",
+            count(summary.robots as u64, "robot"),
+            loaded.scene.robots_per_map
+        ),
+    };
     println!(
-        "{} × {} × {} ({} on each of {}) in {:.2} s: {:.1} world-steps/s, {:.0} robot-steps/s ({})",
+        "{} × {} × {robots} in {:.2} s: {:.1} world-steps/s, {:.0} robot-steps/s ({})",
         count(summary.steps, "step"),
         count(summary.worlds, "world"),
-        count(summary.robots as u64, "robot"),
-        loaded.scene.robots_per_map,
-        count(summary.maps as u64, "map"),
         seconds,
         summary.steps_per_s,
         summary.robot_steps_per_s,
