@@ -4,7 +4,9 @@
 //!
 //! Start: tracking and semi-global draw around `--init` when given (used as it is), else around
 //! the first line's `truth` perturbed as the task prescribes; global needs neither. Every input
-//! is checked (map, every log line, the flags) before the filter runs.
+//! is checked (map, every log line, the flags) before the filter runs. The command prints the
+//! start it assumed, and after the run how well the scans fit the map at the estimates (a log
+//! from another map, or a lost filter, is warned about).
 
 use crate::cli::count;
 use crate::particles::{InitParams, KldParams, ResampleParams, Task};
