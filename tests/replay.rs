@@ -6,10 +6,12 @@ use apfn::cli::run::load_pipeline;
 use apfn::cli::{Cli, run};
 use apfn::compose::{LoadedScene, MapSource, Scene};
 use apfn::particles::Task;
-use apfn::replay::{EstimateLine, InitialGuess, Localizer, LocalizerParams, LogLine, read_log, to_jsonl};
-use apfn::world::map::load_ros_map;
-use apfn::world::map::procedural::Split;
-use apfn::world::{Pose2, angle_error};
+use apfn::replay::{
+    EstimateLine, InitialGuess, Localizer, LocalizerParams, LogLine, MIN_FIT, read_log, scan_fit, to_jsonl,
+};
+use apfn::world::map::procedural::{Split, generate_apartment};
+use apfn::world::map::{DistanceField, load_ros_map};
+use apfn::world::{OccupancyMap, Pose2, angle_error};
 use clap::Parser;
 use std::path::{Path, PathBuf};
 
@@ -121,6 +123,29 @@ fn replay_tracking_localizes_a_recorded_log() {
     assert!(mean_last_half < 0.3, "mean error over the last half {mean_last_half} m, expected < 0.3 m");
     assert!(estimates.iter().all(|e| e.cov.iter().all(|c| c.is_finite())), "covariances are finite");
     assert!(estimates[59].cov[0] >= 0.0 && estimates[59].cov[4] >= 0.0, "variances are non-negative");
+}
+
+#[test]
+fn replay_scans_fit_their_own_map_at_the_estimates_and_not_another() {
+    let rec = record_small(40);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let estimates = localize(&rec, dir.path(), 3);
+    let mean_fit = |map: &OccupancyMap| {
+        let field = DistanceField::build(map);
+        let fits: Vec<f32> = rec
+            .lines
+            .iter()
+            .zip(&estimates)
+            .filter_map(|(l, e)| {
+                scan_fit(&l.scan(), &Pose2::new(e.pose[0], e.pose[1], e.pose[2]), map, &field)
+            })
+            .collect();
+        fits.iter().sum::<f32>() / fits.len() as f32
+    };
+    let own = mean_fit(&rec.map);
+    assert!(own >= MIN_FIT, "a tracked log fits its own map: {own}");
+    let other = mean_fit(&generate_apartment(Split::Seen.seeds().start + 7, &Default::default()));
+    assert!(other < MIN_FIT, "the same scans and poses do not fit another apartment: {other}");
 }
 
 #[test]

@@ -2,7 +2,7 @@
 //! cells in parallel, with a progress bar; writes results.json, results.csv, results.md and
 //! episodes.csv, and with `--figures N` a PNG of each cell's first N episodes under `figures/`.
 
-use crate::cli::set_threads;
+use crate::cli::{count, set_threads};
 use crate::eval::{
     CellOutcome, EpisodeRow, EvalConfig, ResultRow, cell_steps, cells, encode_png, episode_figure,
     figure_file_name, figure_title, run_cell, write_results,
@@ -61,16 +61,20 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         })
         .sum();
     println!(
-        "{} cells, {} agent steps ({:.0} robot-steps/s) in {:.1} s ({} threads); wrote {}/results.{{json,csv,md}} and episodes.csv",
-        rows.len(),
-        total,
+        "{}, {} ({:.0} robot-steps/s) in {:.1} s ({}); wrote {}/results.{{json,csv,md}} and episodes.csv",
+        count(rows.len() as u64, "cell"),
+        count(total, "agent step"),
         robot_steps as f64 / seconds,
         seconds,
-        rayon::current_num_threads(),
+        count(rayon::current_num_threads() as u64, "thread"),
         args.out.display()
     );
     if figures > 0 {
-        println!("wrote {figures} episode figures to {}", args.out.join("figures").display());
+        println!(
+            "wrote {} to {}",
+            count(figures as u64, "episode figure"),
+            args.out.join("figures").display()
+        );
     }
     print!("{}", crate::eval::markdown(&rows));
     Ok(())

@@ -4,10 +4,16 @@
 //!
 //! Start: tracking and semi-global draw around `--init` when given (used as it is), else around
 //! the first line's `truth` perturbed as the task prescribes; global needs neither. Every input
-//! is checked (map, every log line, the flags) before the filter runs.
+//! is checked (map, every log line, the flags) before the filter runs. The command prints the
+//! start it assumed, and after the run how well the scans fit the map at the estimates (a log
+//! from another map, or a lost filter, is warned about).
 
+use crate::cli::count;
 use crate::particles::{InitParams, KldParams, ResampleParams, Task};
-use crate::replay::{EstimateLine, InitialGuess, Localizer, LocalizerParams, LogLine, read_log, to_jsonl};
+use crate::replay::{
+    EstimateLine, FIT_TOLERANCE_M, InitialGuess, Localizer, LocalizerParams, LogLine, MIN_FIT, read_log,
+    to_jsonl,
+};
 use crate::world::map::{load_ros_map, write_atomically};
 use crate::world::{Pose2, angle_error, wrap_angle};
 use anyhow::{Context, ensure};
@@ -69,11 +75,13 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
     let mut filter = Localizer::new(map, params, guess, args.seed).with_context(|| {
         format!("starting the filter on map {} and log {}", args.map.display(), args.log.display())
     })?;
+    println!("{}", start_line(&filter, guess));
     if filter.fell_back_to_global() {
         eprintln!(
             "warning: the semi-global box around the initial guess holds no traversable cell; drew globally"
         );
     }
+    let start_particles = filter.particles().len();
 
     let bar = ProgressBar::new(lines.len() as u64).with_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} scans, {per_sec}, eta {eta}")
@@ -87,17 +95,41 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
     }
     write_atomically(&args.out, to_jsonl(&estimates)?.as_bytes())?;
     let mean_ms = estimates.iter().map(|e| e.update_ms).sum::<f64>() / estimates.len() as f64;
+    let particles = match &filter.params().resample.kld {
+        Some(k) => format!(
+            "KLD-sampling between {} and {} particles: {start_particles} at the start, {} at the end",
+            k.min_particles,
+            k.max_particles,
+            filter.particles().len()
+        ),
+        None => count(start_particles as u64, "particle"),
+    };
     println!(
-        "localized {} scans ({} particles, task {}): {mean_ms:.2} ms per update; wrote {}",
-        estimates.len(),
-        filter.particles().len(),
-        args.task.name(),
+        "localized {} with {particles}; {mean_ms:.2} ms per update; wrote {}",
+        count(estimates.len() as u64, "scan"),
         args.out.display()
     );
+    if let Some(fit) = log_fit(&filter, &lines, &estimates) {
+        let fit_line = format!(
+            "seen from the estimates, {:.0} % of the scans' beams end within {FIT_TOLERANCE_M} m of an \
+             occupied cell",
+            fit * 100.0
+        );
+        if fit < MIN_FIT {
+            eprintln!(
+                "warning: the log does not fit map {}: {fit_line} (a log localized on its own map scores 99 % \
+                 or more). Was it recorded on another map, or did the filter start in the wrong place \
+                 (check --init, or try --task global)?",
+                args.map.display()
+            );
+        } else {
+            println!("map check: {fit_line}");
+        }
+    }
     if let Some(e) = truth_errors(&lines, &estimates) {
         println!(
-            "vs truth on {} lines: mean position error {:.1} cm, mean |heading error| {:.3} rad, final {:.1} cm",
-            e.lines,
+            "vs truth on {}: mean position error {:.1} cm, mean |heading error| {:.3} rad, final {:.1} cm",
+            count(e.lines as u64, "line"),
             e.mean_position_m * 100.0,
             e.mean_heading_rad,
             e.final_position_m * 100.0
@@ -105,9 +137,50 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
     }
     let health = filter.health();
     if health.degeneracies > 0 {
-        eprintln!("warning: the weights degenerated {} times and were reset to uniform", health.degeneracies);
+        eprintln!(
+            "warning: the weights degenerated {} and were reset to uniform",
+            count(health.degeneracies, "time")
+        );
     }
     Ok(())
+}
+
+/// Mean [`scan_fit`](crate::replay::scan_fit) of every scan at its estimate; `None` when no scan
+/// has a usable beam.
+fn log_fit(filter: &Localizer, lines: &[LogLine], estimates: &[EstimateLine]) -> Option<f32> {
+    let fits: Vec<f32> = lines
+        .iter()
+        .zip(estimates)
+        .filter_map(|(line, e)| filter.scan_fit(&line.scan(), &Pose2::new(e.pose[0], e.pose[1], e.pose[2])))
+        .collect();
+    (!fits.is_empty()).then(|| fits.iter().sum::<f32>() / fits.len() as f32)
+}
+
+/// What the filter assumed about the start, in the command line's words.
+fn start_line(filter: &Localizer, guess: InitialGuess) -> String {
+    let init = &filter.params().init;
+    let (task, n) = (init.task, filter.particles().len());
+    let around = |centre: Pose2| format!("({:.2}, {:.2}, {:.2})", centre.x, centre.y, centre.yaw);
+    let spread = match task {
+        Task::Tracking => {
+            format!("Gaussian (σ {} m, {}°)", init.tracking_sigma_m, init.tracking_sigma_deg)
+        }
+        _ => format!("uniform over the traversable cells of a {} m box", init.semi_global_box_m),
+    };
+    let source = match (filter.start_centre(), guess) {
+        (None, _) => return format!("start: --task {}, {n} particles uniform over the map", task.name()),
+        (Some(c), InitialGuess::Pose(_)) => format!("around --init {}", around(c)),
+        (Some(c), InitialGuess::PerturbedTruth(truth)) => format!(
+            "around {}: the log's first `truth` {} moved {:.2} m and {:.2} rad, as the simulator perturbs \
+             the task's guess (give your own with --init X,Y,THETA)",
+            around(c),
+            around(truth),
+            c.distance(&truth),
+            angle_error(c.yaw, truth.yaw)
+        ),
+        (Some(c), InitialGuess::Unknown) => format!("around {}", around(c)),
+    };
+    format!("start: --task {}, {n} particles, {spread} {source}", task.name())
 }
 
 /// The filter's params from the flags; rejects `--particles 0` and α outside [0, 1].

@@ -3,7 +3,7 @@
 use crate::world::RobotParams;
 use crate::world::map::procedural::{ApartmentParams, generate_apartment};
 use crate::world::map::{TraversableMap, load_ros_map, render, save_ros_map, write_atomically};
-use anyhow::{Context, bail};
+use anyhow::{Context, bail, ensure};
 use image::ImageFormat;
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
@@ -25,7 +25,7 @@ pub enum MapCommand {
         /// Draw the procedural apartment with this seed instead of a file.
         #[arg(long)]
         procedural: Option<u64>,
-        /// The PNG file to write.
+        /// The PNG file to write (its name must end in .png).
         #[arg(long)]
         out: PathBuf,
     },
@@ -48,6 +48,11 @@ pub fn run(cmd: MapCommand) -> anyhow::Result<()> {
             println!("{}", inspect(&path)?);
         }
         MapCommand::Render { path, procedural, out } => {
+            ensure!(
+                out.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")),
+                "--out {}: map render writes PNG only; expected a file name ending in .png",
+                out.display()
+            );
             let map = match (path, procedural) {
                 (Some(path), None) => load_ros_map(&path)?,
                 (None, Some(seed)) => generate_apartment(seed, &ApartmentParams::default()),
@@ -61,11 +66,20 @@ pub fn run(cmd: MapCommand) -> anyhow::Result<()> {
                 .write_to(&mut Cursor::new(&mut png), ImageFormat::Png)
                 .context("encoding the PNG")?;
             write_atomically(&out, &png)?;
+            println!(
+                "wrote {} ({} × {} pixels, one per {} m cell)",
+                out.display(),
+                map.width,
+                map.height,
+                map.resolution_m
+            );
         }
         MapCommand::Export { procedural, out } => {
             let map = generate_apartment(procedural, &ApartmentParams::default());
             std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-            save_ros_map(&map, &out.join(format!("apartment_{procedural}.yaml")))?;
+            let yaml = out.join(format!("apartment_{procedural}.yaml"));
+            save_ros_map(&map, &yaml)?;
+            println!("wrote {} and {}", yaml.display(), yaml.with_extension("pgm").display());
         }
     }
     Ok(())
@@ -156,6 +170,11 @@ mod tests {
         assert_eq!(img.get_pixel(1, 1), &Rgb([150, 150, 150]), "row 0 is the map's top: unknown at (1, 13)");
         assert_eq!(img.get_pixel(1, 7), &Rgb([255, 255, 255]), "free next to a wall is not reachable");
         assert_eq!(img.get_pixel(6, 7), &Rgb([214, 232, 255]), "open floor is tinted reachable");
+        let jpg = dir.path().join("room.jpg");
+        let err =
+            run(MapCommand::Render { path: None, procedural: Some(1), out: jpg.clone() }).expect_err(".jpg");
+        assert!(err.to_string().contains("ending in .png"), "{err}");
+        assert!(!jpg.exists(), "nothing is written under a name that promises another format");
     }
 
     #[test]

@@ -1,13 +1,18 @@
 //! `apfn run`: runs a scene headless under a schedule, records every robot's trajectory and
-//! reports the simulation speed.
+//! reports the simulation speed and, when the schedule measures it, the localization error.
 
 use crate::act::Collided;
 use crate::agent::Action;
-use crate::cli::set_threads;
-use crate::compose::{ComposeError, LoadedScene, MapName, Pipeline, Scene, standard_registry};
-use crate::episode::Episode;
+use crate::cli::{count, set_threads};
+use crate::compose::{
+    ComposeError, LoadedScene, MapName, Pipeline, Scene, relative_to_file, standard_registry,
+};
+use crate::episode::{
+    CellMetrics, CompletedEpisodes, Episode, EpisodeRecord, SUCCESS_RADIUS_M, succeeded, summarize,
+};
 use crate::particles::{ParticleSet, PoseEstimate};
 use crate::plugin::headless_app;
+use crate::sweep::Proportion;
 use crate::world::map::write_atomically;
 use crate::world::{OnMap, TruePose};
 use anyhow::Context;
@@ -31,7 +36,8 @@ pub struct RunArgs {
     /// Agent steps to simulate (each robot moves once per step).
     #[arg(long, default_value_t = 200)]
     pub steps: u64,
-    /// Folder for trajectories.jsonl and run.json (created if missing).
+    /// Folder for trajectories.jsonl and run.json (created if missing); without it nothing is
+    /// written.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Independent copies of the scene (seeds seed, seed+1, …), run in parallel on rayon threads.
@@ -81,7 +87,7 @@ pub struct TrajectoryRow {
     pub collided: bool,
 }
 
-/// What run.json holds: the inputs and the measured speed.
+/// What run.json holds: the inputs, the measured speed and the localization error.
 #[derive(Serialize, Debug)]
 pub struct RunSummary {
     pub scene: String,
@@ -96,6 +102,8 @@ pub struct RunSummary {
     pub seconds: f64,
     pub steps_per_s: f64,
     pub robot_steps_per_s: f64,
+    /// Over the episodes that ran to their end; `None` without `step_metrics` or such episodes.
+    pub localization: Option<CellMetrics>,
 }
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
@@ -117,6 +125,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             simulate(&copy, pipeline.clone(), world, args.steps, || bar.inc(1))
         })
         .collect::<Result<Vec<_>, _>>()?;
+    let (worlds, episodes): (Vec<_>, Vec<_>) = worlds.into_iter().unzip();
+    let episodes: Vec<EpisodeRecord> = episodes.into_iter().flatten().collect();
     bar.finish_and_clear();
     let seconds = started.elapsed().as_secs_f64();
 
@@ -132,34 +142,78 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         seconds,
         steps_per_s: (args.steps * args.worlds) as f64 / seconds,
         robot_steps_per_s: (args.steps * args.worlds) as f64 * robots_per_world as f64 / seconds,
+        localization: summarize(&episodes),
+    };
+    let robots = match summary.maps {
+        1 => format!("{} on 1 map", count(summary.robots as u64, "robot")),
+        maps => format!(
+            "{} ({} on each of {maps} maps)",
+            count(summary.robots as u64, "robot"),
+            loaded.scene.robots_per_map
+        ),
     };
     println!(
-        "{} steps × {} worlds × {} robots ({} maps each) in {:.2} s: {:.1} world-steps/s, {:.0} robot-steps/s ({} threads)",
-        summary.steps,
-        summary.worlds,
-        summary.robots,
-        summary.maps,
+        "{} × {} × {robots} in {:.2} s: {:.1} world-steps/s, {:.0} robot-steps/s ({})",
+        count(summary.steps, "step"),
+        count(summary.worlds, "world"),
         seconds,
         summary.steps_per_s,
         summary.robot_steps_per_s,
-        summary.threads
+        count(summary.threads as u64, "thread")
     );
-    if let Some(out) = &args.out {
-        let rows: Vec<TrajectoryRow> = worlds.into_iter().flatten().collect();
-        write_outputs(out, &rows, &summary)?;
-        println!("wrote {}/trajectories.jsonl and run.json", out.display());
+    println!("{}", accuracy_line(&pipeline, &episodes, loaded.scene.episode.steps, args.steps));
+    match &args.out {
+        Some(out) => {
+            let rows: Vec<TrajectoryRow> = worlds.into_iter().flatten().collect();
+            write_outputs(out, &rows, &summary)?;
+            println!(
+                "wrote {} and {}",
+                out.join("trajectories.jsonl").display(),
+                out.join("run.json").display()
+            );
+        }
+        None => println!("wrote nothing: add --out DIR to save trajectories.jsonl and run.json"),
     }
     Ok(())
 }
 
-/// Runs one independent world for `steps` agent steps and returns every robot's rows.
+/// One line on how well the filter localized in the episodes that ran to their end, or why
+/// there is nothing to say.
+fn accuracy_line(pipeline: &Pipeline, episodes: &[EpisodeRecord], episode_steps: u32, steps: u64) -> String {
+    if !pipeline.names().contains(&"step_metrics") {
+        return "localization error: not measured (the schedule has no `step_metrics` step)".into();
+    }
+    let Some(m) = summarize(episodes) else {
+        return format!(
+            "localization error: no episode finished ({} per episode, {} run); add --steps",
+            count(episode_steps, "step"),
+            steps
+        );
+    };
+    let successes = episodes.iter().filter(|r| succeeded(&r.log.errors)).count();
+    let success = Proportion::wilson(successes, episodes.len()).map_or_else(String::new, |p| p.percent());
+    format!(
+        "localization error over {} of {}: mean {:.1} cm / {:.3} rad, final {:.1} cm / {:.3} rad; \
+         success (< {SUCCESS_RADIUS_M} m over the last quarter) {successes} of {}: {success}",
+        count(m.episodes as u64, "finished episode"),
+        count(episode_steps, "step"),
+        m.mean_pos_err_m * 100.0,
+        m.mean_orient_err_rad,
+        m.final_pos_err_m * 100.0,
+        m.final_orient_err_rad,
+        m.episodes
+    )
+}
+
+/// Runs one independent world for `steps` agent steps; returns every robot's rows and the
+/// episodes that ran to their end (logged when the schedule has `step_metrics`).
 fn simulate(
     scene: &LoadedScene,
     pipeline: Pipeline,
     world: u64,
     steps: u64,
     on_step: impl Fn(),
-) -> Result<Vec<TrajectoryRow>, ComposeError> {
+) -> Result<(Vec<TrajectoryRow>, Vec<EpisodeRecord>), ComposeError> {
     let (mut app, robots) = headless_app(scene, pipeline)?;
     let mut rows = Vec::new();
     for step in 0..steps {
@@ -167,7 +221,8 @@ fn simulate(
         rows.extend(snapshot(app.world_mut(), &robots, world, step));
         on_step();
     }
-    Ok(rows)
+    let episodes = std::mem::take(&mut app.world_mut().resource_mut::<CompletedEpisodes>().0);
+    Ok((rows, episodes))
 }
 
 /// The scene from `path`, or the embedded default.
@@ -187,10 +242,9 @@ pub fn load_scene(path: Option<&Path>) -> anyhow::Result<LoadedScene> {
 /// The schedule from `path`, else the scene's own (relative to the scene file), else the default.
 pub fn load_pipeline(path: Option<&Path>, scene: &LoadedScene) -> anyhow::Result<Pipeline> {
     let registry = standard_registry();
-    let scene_dir = scene.path.parent().unwrap_or(Path::new("."));
     Ok(match (path, &scene.scene.systems) {
         (Some(path), _) => Pipeline::load(path, &registry)?,
-        (None, Some(relative)) => Pipeline::load(&scene_dir.join(relative), &registry)?,
+        (None, Some(relative)) => Pipeline::load(&relative_to_file(&scene.path, relative), &registry)?,
         (None, None) => Pipeline::parse(DEFAULT_SYSTEMS.1, Path::new(DEFAULT_SYSTEMS.0), &registry)?,
     })
 }
@@ -238,4 +292,30 @@ fn write_outputs(out: &Path, rows: &[TrajectoryRow], summary: &RunSummary) -> an
     write_atomically(&out.join("trajectories.jsonl"), lines.as_bytes())?;
     write_atomically(&out.join("run.json"), serde_json::to_string_pretty(summary)?.as_bytes())?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::episode::{EpisodeLog, StepError};
+
+    fn episode(final_err_m: f32) -> EpisodeRecord {
+        let err = |pos_err_m| StepError { pos_err_m, orient_err_rad: 0.1, loss: 0.0 };
+        let log = EpisodeLog { errors: vec![err(0.1), err(final_err_m)], ..Default::default() };
+        EpisodeRecord { robot: Entity::PLACEHOLDER, map: Entity::PLACEHOLDER, episode: 0, log }
+    }
+
+    #[test]
+    fn accuracy_line_reports_errors_success_or_why_not() {
+        let registry = standard_registry();
+        let parse = |text: &str| Pipeline::parse(text, Path::new("inline.ron"), &registry).expect("schedule");
+        let measured = parse(DEFAULT_SYSTEMS.1);
+        let line = accuracy_line(&measured, &[episode(0.2), episode(3.0)], 2, 10);
+        assert!(line.contains("2 finished episodes of 2 steps"), "{line}");
+        assert!(line.contains("final 160.0 cm") && line.contains("1 of 2: 50 %"), "{line}");
+        let none = accuracy_line(&measured, &[], 50, 30);
+        assert!(none.contains("no episode finished (50 steps per episode, 30 run)"), "{none}");
+        let unmeasured = parse(r#"Schedule(steps: [("random_policy", ()), ("drive", ())])"#);
+        assert!(accuracy_line(&unmeasured, &[], 50, 30).contains("not measured"));
+    }
 }

@@ -2,7 +2,7 @@
 //! progress bar, skipping finished ones, then the merged mean ± 95 % CI tables. For more than one
 //! machine: `--list-jobs`, `--job N` on each worker, then `--merge` (docs/cluster.md).
 
-use crate::cli::set_threads;
+use crate::cli::{count, set_threads};
 use crate::sweep::{
     JobStatus, LoadedSweep, SweepConfig, collect, job_at, job_status, job_steps, jobs, list_lines, markdown,
     merge, run_job, write_job_result, write_sweep,
@@ -85,8 +85,8 @@ fn run_all(sweep: &LoadedSweep, out: &Path) -> anyhow::Result<()> {
         }
     }
     println!(
-        "{} jobs: {done} already done (skipped), {stale} stale (rerun: inputs changed), {} to run",
-        all.len(),
+        "{}: {done} already done (skipped), {stale} stale (rerun: inputs changed), {} to run",
+        count(all.len() as u64, "job"),
         todo.len()
     );
     let total: u64 = todo.iter().map(|job| job_steps(sweep, job)).sum();
@@ -103,10 +103,11 @@ fn run_all(sweep: &LoadedSweep, out: &Path) -> anyhow::Result<()> {
     })?;
     bar.finish_and_clear();
     println!(
-        "ran {} jobs, {total} agent steps in {:.1} s ({} threads)",
-        todo.len(),
+        "ran {}, {} in {:.1} s ({})",
+        count(todo.len() as u64, "job"),
+        count(total, "agent step"),
         started.elapsed().as_secs_f64(),
-        rayon::current_num_threads()
+        count(rayon::current_num_threads() as u64, "thread")
     );
     Ok(())
 }
@@ -117,10 +118,10 @@ fn merge_all(sweep: &LoadedSweep, out: &Path, allow_partial: bool) -> anyhow::Re
     let rows = merge(&results);
     write_sweep(out, &rows)?;
     println!(
-        "merged {} of {} jobs into {} rows; wrote {}/sweep.{{json,csv,md}}",
+        "merged {} of {} into {}; wrote {}/sweep.{{json,csv,md}}",
         results.len(),
-        all.len(),
-        rows.len(),
+        count(all.len() as u64, "job"),
+        count(rows.len() as u64, "row"),
         out.display()
     );
     print!("{}", markdown(&rows));

@@ -28,8 +28,15 @@ pub fn listing() -> String {
         if !entry.produces.is_empty() {
             out += &format!("  produces: {}\n", entry.produces.join(", "));
         }
-        let params = entry.with_defaults().params_ron();
-        out += &format!("  params: {}\n\n", params.replace('\n', "\n  "));
+        let configured = entry.with_defaults();
+        out += &format!("  params: {}\n", configured.params_ron().replace('\n', "\n  "));
+        for (field, defaults) in configured.optional_ron() {
+            out += &format!(
+                "  {field}: off by default; `{field}: Some(())` switches it on with\n    {}\n",
+                defaults.replace('\n', "\n    ")
+            );
+        }
+        out.push('\n');
     }
     out
 }
@@ -45,5 +52,9 @@ mod tests {
             assert!(text.contains(&format!("{name} [")), "listing misses `{name}`");
         }
         assert!(text.contains("alpha: 0.5"), "resample's paper default α = 0.5 must be listed");
+        assert!(
+            text.contains("`kld: Some(())` switches it on") && text.contains("min_particles: 500"),
+            "KLD's nested fields and nav2 defaults must be listed, not only `kld: None`"
+        );
     }
 }

@@ -15,6 +15,8 @@ pub trait ConfiguredSystem: Send + Sync {
     fn install(&self, app: &mut App, slot: StepSlot, stage: ApfnSet);
     /// The parameters as pretty RON, for listings.
     fn params_ron(&self) -> String;
+    /// [`StepParams::optional_defaults`] of the parameter type, for listings.
+    fn optional_ron(&self) -> Vec<(&'static str, String)>;
     /// A copy, so one validated pipeline can configure many worlds.
     fn boxed_clone(&self) -> Box<dyn ConfiguredSystem>;
 }
@@ -31,6 +33,19 @@ pub trait StepParams: Resource + Serialize + DeserializeOwned + Default + Clone 
     fn check(&self) -> Result<(), String> {
         Ok(())
     }
+
+    /// Optional groups of parameters that are off by default (`None`), each with the fields and
+    /// defaults it takes when switched on (`Some(())`), as pretty RON: what a listing shows
+    /// beyond `field: None`.
+    fn optional_defaults() -> Vec<(&'static str, String)> {
+        Vec::new()
+    }
+}
+
+/// `value` as the pretty RON listings print, with struct names.
+pub fn pretty_ron(value: &impl Serialize) -> String {
+    ron::ser::to_string_pretty(value, ron::ser::PrettyConfig::default().struct_names(true))
+        .unwrap_or_else(|e| format!("<unprintable: {e}>"))
 }
 
 /// `Err("{field}: expected {expected}")` unless `ok`; the building block of [`StepParams::check`].
@@ -89,7 +104,7 @@ struct WithParams<P, S, M> {
 
 impl<P, S, M> ConfiguredSystem for WithParams<P, S, M>
 where
-    P: Resource + Serialize + Clone,
+    P: StepParams,
     S: IntoScheduleConfigs<ScheduleSystem, M> + Copy + Send + Sync + 'static,
     M: 'static,
 {
@@ -99,8 +114,11 @@ where
     }
 
     fn params_ron(&self) -> String {
-        ron::ser::to_string_pretty(&self.params, ron::ser::PrettyConfig::default().struct_names(true))
-            .unwrap_or_else(|e| format!("<unprintable: {e}>"))
+        pretty_ron(&self.params)
+    }
+
+    fn optional_ron(&self) -> Vec<(&'static str, String)> {
+        P::optional_defaults()
     }
 
     fn boxed_clone(&self) -> Box<dyn ConfiguredSystem> {

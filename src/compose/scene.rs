@@ -7,6 +7,7 @@
 
 use crate::act::PhysicsParams;
 use crate::compose::error::{ComposeError, read_ron};
+use crate::compose::paths::relative_to_file;
 use crate::episode::EpisodeParams;
 use crate::world::map::load_ros_map;
 use crate::world::map::procedural::{ApartmentParams, Split, generate_apartment};
@@ -63,8 +64,21 @@ pub enum MapSource {
         #[serde(default)]
         params: ApartmentParams,
     },
-    /// ROS map_server YAML files, relative to the scene file (as map_server resolves images).
-    Ros { paths: Vec<PathBuf> },
+    /// ROS map_server YAML files, relative to the scene file (as map_server resolves images):
+    /// `Ros(path: "office.yaml")` for one map (the spelling eval configs use too), or
+    /// `Ros(paths: ["a.yaml", "b.yaml"])` for several.
+    Ros {
+        #[serde(default, deserialize_with = "some_path")]
+        path: Option<PathBuf>,
+        #[serde(default)]
+        paths: Vec<PathBuf>,
+    },
+}
+
+/// `path: "a.yaml"` rather than RON's `path: Some("a.yaml")`: the field is optional only so that
+/// `paths` can stand in for it.
+pub fn some_path<'de, D: serde::Deserializer<'de>>(de: D) -> Result<Option<PathBuf>, D::Error> {
+    PathBuf::deserialize(de).map(Some)
 }
 
 /// A map ready to spawn, with the name results are filed under.
@@ -128,29 +142,30 @@ impl Scene {
             let field = format!("maps.params.{}", e.field);
             return Err(invalid(&field, &format!("expected {}, got {}", e.expected, e.got)));
         }
+        if let MapSource::Ros { path: Some(_), paths } = &self.maps
+            && !paths.is_empty()
+        {
+            return Err(invalid("maps", "expected `path` (one map) or `paths` (several), not both"));
+        }
         let maps = match &self.maps {
-            MapSource::Procedural { count: 0, .. } | MapSource::Ros { paths: _ } if self.map_count() == 0 => {
-                return Err(invalid("maps", "expected at least one map"));
-            }
+            _ if self.map_count() == 0 => return Err(invalid("maps", "expected at least one map")),
             MapSource::Procedural { split, first, count, params } => (0..*count as u64)
                 .map(|k| {
                     let seed = split.seeds().start + first + k;
                     NamedMap { name: format!("apartment_{seed}"), map: generate_apartment(seed, params) }
                 })
                 .collect(),
-            MapSource::Ros { paths } => {
-                let base = path.parent().unwrap_or(Path::new("."));
-                paths
-                    .iter()
-                    .map(|p| {
-                        let map = load_ros_map(&base.join(p)).map_err(|e| invalid("maps", &e.to_string()))?;
-                        let name = p
-                            .file_stem()
-                            .map_or_else(|| p.display().to_string(), |s| s.to_string_lossy().into());
-                        Ok(NamedMap { name, map })
-                    })
-                    .collect::<Result<_, ComposeError>>()?
-            }
+            MapSource::Ros { path: one, paths } => one
+                .iter()
+                .chain(paths)
+                .map(|p| {
+                    let map = load_ros_map(&relative_to_file(path, p))
+                        .map_err(|e| invalid("maps", &e.to_string()))?;
+                    let name =
+                        p.file_stem().map_or_else(|| p.display().to_string(), |s| s.to_string_lossy().into());
+                    Ok(NamedMap { name, map })
+                })
+                .collect::<Result<_, ComposeError>>()?,
         };
         Ok(LoadedScene { path: path.to_owned(), scene: self, maps })
     }
@@ -158,7 +173,42 @@ impl Scene {
     fn map_count(&self) -> usize {
         match &self.maps {
             MapSource::Procedural { count, .. } => *count,
-            MapSource::Ros { paths } => paths.len(),
+            MapSource::Ros { path, paths } => usize::from(path.is_some()) + paths.len(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::tiny_room;
+    use crate::world::map::save_ros_map;
+
+    /// A scene file beside two saved copies of the tiny room, with `maps` spelled as given.
+    fn load_with(maps: &str) -> Result<LoadedScene, ComposeError> {
+        let dir = tempfile::tempdir().expect("temp dir");
+        std::fs::create_dir(dir.path().join("maps")).expect("maps folder");
+        for name in ["a", "b"] {
+            save_ros_map(&tiny_room(), &dir.path().join(format!("maps/{name}.yaml"))).expect("save map");
+        }
+        let scene = dir.path().join("scene.ron");
+        std::fs::write(&scene, format!("Scene(maps: {maps})")).expect("write scene");
+        Scene::load(&scene)
+    }
+
+    #[test]
+    fn ros_maps_take_path_or_paths_relative_to_the_scene() {
+        let one = load_with(r#"Ros(path: "maps/a.yaml")"#).expect("`path`, as eval configs spell it");
+        assert_eq!(one.maps.iter().map(|m| m.name.as_str()).collect::<Vec<_>>(), ["a"]);
+        let two = load_with(r#"Ros(paths: ["maps/a.yaml", "./maps/../maps/b.yaml"])"#).expect("`paths`");
+        assert_eq!(two.maps.iter().map(|m| m.name.as_str()).collect::<Vec<_>>(), ["a", "b"]);
+    }
+
+    #[test]
+    fn ros_maps_reject_both_spellings_at_once_and_none() {
+        let both = load_with(r#"Ros(path: "maps/a.yaml", paths: ["maps/b.yaml"])"#).expect_err("both");
+        assert!(both.to_string().contains("not both"), "{both}");
+        let none = load_with("Ros()").expect_err("no map");
+        assert!(none.to_string().contains("at least one map"), "{none}");
     }
 }

@@ -49,6 +49,8 @@ pub struct EpisodeLog {
     pub estimates: Vec<Pose2>,
     /// Positions of up to `FIGURE_PARTICLES` particles after the episode's first filter update.
     pub first_particles: Vec<(f32, f32)>,
+    /// How many particles the set held then (more than `first_particles` when subsampled).
+    pub first_particle_count: usize,
     /// Collisions seen at this episode's steps 2…T, i.e. caused by its first T − 1 actions
     /// (the last action's outcome is only seen after the episode ends).
     pub collisions: u32,
@@ -92,6 +94,7 @@ pub fn step_metrics(
             if let Some(set) = particles {
                 let stride = set.len().div_ceil(FIGURE_PARTICLES).max(1);
                 log.first_particles = (0..set.len()).step_by(stride).map(|k| (set.x[k], set.y[k])).collect();
+                log.first_particle_count = set.len();
             }
         } else if collided.is_some_and(|c| c.0) {
             log.collisions += 1;
@@ -225,5 +228,6 @@ mod tests {
         assert_eq!(done[0].log.errors.len(), 2);
         assert_eq!(done[0].log.truth, vec![truth; 2], "truth is logged per step for figures");
         assert_eq!(done[0].log.first_particles.len(), 3, "the first step's particles are kept");
+        assert_eq!(done[0].log.first_particle_count, 3, "with their count");
     }
 }

@@ -10,7 +10,9 @@
 //! )
 //! ```
 
-use crate::compose::{ComposeError, MapSource, Pipeline, Scene, read_ron, standard_registry};
+use crate::compose::{
+    ComposeError, MapSource, Pipeline, Scene, read_ron, relative_to_file, standard_registry,
+};
 use crate::episode::EpisodeParams;
 use crate::particles::Task;
 use crate::world::RobotParams;
@@ -82,8 +84,14 @@ pub enum MapGroup {
         #[serde(default)]
         params: ApartmentParams,
     },
-    /// One ROS map (relative to the config file); its split is the map's name.
-    Ros { path: PathBuf },
+    /// ROS maps (relative to the config file), spelled as in scenes: `Ros(path: "a.yaml")` for
+    /// one, `Ros(paths: [...])` for a column over several. Its split is the maps' names.
+    Ros {
+        #[serde(default, deserialize_with = "crate::compose::some_path")]
+        path: Option<PathBuf>,
+        #[serde(default)]
+        paths: Vec<PathBuf>,
+    },
 }
 
 impl MapGroup {
@@ -92,8 +100,10 @@ impl MapGroup {
         match self {
             MapGroup::Apartments { split: Split::Seen, .. } => "seen".into(),
             MapGroup::Apartments { split: Split::Unseen, .. } => "unseen".into(),
-            MapGroup::Ros { path } => {
-                path.file_stem().map_or("map".into(), |s| s.to_string_lossy().into_owned())
+            MapGroup::Ros { path, paths } => {
+                let stem =
+                    |p: &PathBuf| p.file_stem().map_or("map".into(), |s| s.to_string_lossy().into_owned());
+                path.iter().chain(paths).map(stem).collect::<Vec<_>>().join("+")
             }
         }
     }
@@ -105,7 +115,9 @@ impl MapGroup {
                 let start = split.seeds().start + first;
                 format!("apartments {start}..{}", start + *count as u64)
             }
-            MapGroup::Ros { path } => path.display().to_string(),
+            MapGroup::Ros { path, paths } => {
+                path.iter().chain(paths).map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+            }
         }
     }
 
@@ -115,7 +127,7 @@ impl MapGroup {
             MapGroup::Apartments { split, first, count, params } => {
                 MapSource::Procedural { split: *split, first: *first, count: *count, params: params.clone() }
             }
-            MapGroup::Ros { path } => MapSource::Ros { paths: vec![path.clone()] },
+            MapGroup::Ros { path, paths } => MapSource::Ros { path: path.clone(), paths: paths.clone() },
         }
     }
 }
@@ -160,13 +172,12 @@ impl EvalConfig {
                 "expected at least 1 particle (or leave it out for the task defaults)".into(),
             ));
         }
-        let base = path.parent().unwrap_or(Path::new("."));
         let registry = standard_registry();
         let mut schedules = self
             .schedules
             .iter()
             .map(|p| {
-                let pipeline = Pipeline::load(&base.join(p), &registry)?;
+                let pipeline = Pipeline::load(&relative_to_file(path, p), &registry)?;
                 // A filter to evaluate, and the episodes and per-step errors the table is made of
                 // (`step_metrics` itself needs `episode_reset`).
                 for needed in ["init_particles", "estimate", "step_metrics"] {

@@ -1,8 +1,9 @@
 //! The paper-style figure of one episode: left, the map around the episode (north up) with the
-//! particles after the first filter update, the true and estimated paths and their start and final
-//! poses; right, position and heading error over the episode's steps.
+//! particles after the first filter update, the true path drawn over the estimate, their start
+//! and final poses, the final error and a scale bar; right, position and heading error over the
+//! episode's steps.
 
-use crate::episode::{EpisodeLog, EpisodeRecord, SUCCESS_RADIUS_M};
+use crate::episode::{EpisodeLog, EpisodeRecord, SUCCESS_RADIUS_M, succeeded};
 use crate::eval::cell::ResultRow;
 use crate::eval::pixel_text::PixelText;
 use crate::world::map::render;
@@ -165,7 +166,8 @@ fn draw_map_overlay<DB: DrawingBackend>(
     for &(x, y) in &log.first_particles {
         root.draw(&Circle::new(view.pixel(map, x, y), 2, PARTICLE.mix(0.45).filled())).map_err(draw_err)?;
     }
-    let paths = [(&log.truth, TRUTH, 4), (&log.estimates, ESTIMATE, 2)];
+    // The estimate first and wide, the truth over it and thin: where they agree, both show.
+    let paths = [(&log.estimates, ESTIMATE, 6), (&log.truth, TRUTH, 2)];
     for (poses, colour, width) in paths {
         let path: Vec<(i32, i32)> = poses.iter().map(|p| view.pixel(map, p.x, p.y)).collect();
         root.draw(&PathElement::new(path, colour.stroke_width(width))).map_err(draw_err)?;
@@ -190,6 +192,8 @@ fn draw_map_overlay<DB: DrawingBackend>(
         root.draw(&Rectangle::new(mask, WHITE.filled())).map_err(draw_err)?;
     }
     root.draw(&Rectangle::new([(l - 1, t - 1), (r, b)], BLACK.stroke_width(1))).map_err(draw_err)?;
+    final_error_label(root, (l, t), &log.errors)?;
+    scale_bar(root, map, view, (r, b))?;
     // Legend: two rows under the map.
     let (x, y) = (MAP_PANEL.0 + 5, MAP_PANEL.1 + MAP_PANEL.3 as i32 + 22);
     let label = |text: &str, at: (i32, i32)| {
@@ -200,39 +204,91 @@ fn draw_map_overlay<DB: DrawingBackend>(
         ))
         .map_err(draw_err)
     };
-    for (k, (text, colour)) in [("true path", TRUTH), ("estimate", ESTIMATE)].into_iter().enumerate() {
-        let x = x + 190 * k as i32;
-        root.draw(&PathElement::new(vec![(x, y), (x + 40, y)], colour.stroke_width(4 - 2 * k as u32)))
+    for (k, (text, colour, width)) in
+        [("true path", TRUTH, 2), ("estimate", ESTIMATE, 6)].into_iter().enumerate()
+    {
+        let x = x + 170 * k as i32;
+        root.draw(&PathElement::new(vec![(x, y), (x + 40, y)], colour.stroke_width(width)))
             .map_err(draw_err)?;
         label(text, (x + 50, y))?;
     }
-    let x = x + 380;
+    let marker = |dx: i32| vec![(x + dx + 16, y), (x + dx, y - 8), (x + dx, y + 8)];
+    start_marker(root, marker(340), BLACK)?;
+    label("start", (x + 368, y))?;
+    root.draw(&Polygon::new(marker(460), BLACK.filled())).map_err(draw_err)?;
+    label("final pose", (x + 488, y))?;
+    let y = y + 32;
     for dx in [4, 12, 9, 18, 25, 31] {
         root.draw(&Circle::new((x + dx, y + (dx % 3) * 3 - 3), 2, PARTICLE.mix(0.6).filled()))
             .map_err(draw_err)?;
     }
-    label("particles at step 1", (x + 42, y))?;
-    let (x, y) = (MAP_PANEL.0 + 5, y + 32);
-    let marker = |dx: i32| vec![(x + dx + 16, y), (x + dx, y - 8), (x + dx, y + 8)];
-    start_marker(root, marker(0), BLACK)?;
-    label("start", (x + 28, y))?;
-    root.draw(&Polygon::new(marker(110), BLACK.filled())).map_err(draw_err)?;
-    label("final pose", (x + 138, y))?;
+    label(&particles_label(log), (x + 50, y))
+}
+
+/// "particles at step 1", and how many of how many are drawn when the set was subsampled.
+fn particles_label(log: &EpisodeLog) -> String {
+    let (shown, total) = (log.first_particles.len(), log.first_particle_count);
+    if shown < total {
+        format!("particles at step 1 ({shown} of {total} drawn)")
+    } else {
+        "particles at step 1".into()
+    }
+}
+
+/// A white box with `lines` of text, its top-left corner at `at`.
+fn boxed_text<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    at: (i32, i32),
+    lines: &[String],
+) -> Result<(), FigureError> {
+    let (x, y) = at;
+    // The pixel font at size 27 advances 12 px per character (see `pixel_text`).
+    let width = 16 + 12 * lines.iter().map(|l| l.chars().count()).max().unwrap_or(0) as i32;
+    let bottom = y + 8 + 28 * lines.len() as i32;
+    root.draw(&Rectangle::new([(x, y), (x + width, bottom)], WHITE.mix(0.85).filled())).map_err(draw_err)?;
+    root.draw(&Rectangle::new([(x, y), (x + width, bottom)], BLACK.stroke_width(1))).map_err(draw_err)?;
+    for (k, line) in lines.iter().enumerate() {
+        let style = TEXT.into_font().color(&BLACK).pos(Pos::new(HPos::Left, VPos::Center));
+        root.draw(&Text::new(line.clone(), (x + 8, y + 18 + 28 * k as i32), style)).map_err(draw_err)?;
+    }
+    Ok(())
+}
+
+/// The final position and heading error and the episode's verdict, in the map's top-left corner.
+fn final_error_label<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    top_left: (i32, i32),
+    errors: &[crate::episode::StepError],
+) -> Result<(), FigureError> {
+    let Some(last) = errors.last() else { return Ok(()) };
+    let verdict = if succeeded(errors) { "success" } else { "failure" };
+    let lines = [
+        format!("final error {:.1} cm, {:.2} rad", last.pos_err_m * 100.0, last.orient_err_rad),
+        format!("{verdict}: < {SUCCESS_RADIUS_M} m in the last 25 %"),
+    ];
+    boxed_text(root, (top_left.0 + 6, top_left.1 + 6), &lines)
+}
+
+/// A bar of 1, 2, 5, 10 or 20 m (the first at least 60 px long) in the map's bottom-right corner.
+fn scale_bar<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    map: &OccupancyMap,
+    view: &View,
+    bottom_right: (i32, i32),
+) -> Result<(), FigureError> {
     let bar_m = [1.0f32, 2.0, 5.0, 10.0]
         .into_iter()
         .find(|m| m / map.resolution_m * view.px_per_cell >= 60.0)
         .unwrap_or(20.0);
     let bar_px = (bar_m / map.resolution_m * view.px_per_cell) as i32;
-    let right = MAP_PANEL.0 + MAP_PANEL.2 as i32 - 5;
-    root.draw(&PathElement::new(vec![(right - bar_px, y), (right, y)], BLACK.stroke_width(4)))
+    let (r, b) = (bottom_right.0 - 10, bottom_right.1 - 12);
+    let left = r - bar_px - 70;
+    root.draw(&Rectangle::new([(left, b - 26), (r + 6, b + 8)], WHITE.mix(0.85).filled()))
         .map_err(draw_err)?;
-    let at = (right - bar_px - 10, y);
-    root.draw(&Text::new(
-        format!("{bar_m} m"),
-        at,
-        TEXT.into_font().color(&BLACK).pos(Pos::new(HPos::Right, VPos::Center)),
-    ))
-    .map_err(draw_err)
+    root.draw(&PathElement::new(vec![(r - bar_px, b - 6), (r, b - 6)], BLACK.stroke_width(4)))
+        .map_err(draw_err)?;
+    let style = TEXT.into_font().color(&BLACK).pos(Pos::new(HPos::Right, VPos::Center));
+    root.draw(&Text::new(format!("{bar_m} m"), (r - bar_px - 8, b - 8), style)).map_err(draw_err)
 }
 
 /// A hollow heading triangle: white inside, coloured outline.
@@ -320,7 +376,14 @@ mod tests {
             truth.iter().map(|p| Pose2 { x: p.x - 0.2, y: p.y + 0.1, yaw: 0.3 }).collect();
         let errors = truth.iter().zip(&estimates).map(|(t, e)| StepError::between(e, t)).collect();
         let first_particles = (0..50).map(|k| (0.3 + 0.02 * k as f32, 0.9)).collect();
-        let log = EpisodeLog { errors, truth, estimates, first_particles, collisions: 0 };
+        let log = EpisodeLog {
+            errors,
+            truth,
+            estimates,
+            first_particles,
+            first_particle_count: 200,
+            collisions: 0,
+        };
         EpisodeRecord { robot: Entity::PLACEHOLDER, map: Entity::PLACEHOLDER, episode: 3, log }
     }
 
@@ -353,11 +416,11 @@ mod tests {
         );
         let (fx, fy) = view.pixel(&map, 1.0, 1.2);
         assert!(!near(&img, (fx, fy), 3, green), "no green far from the path, at ({fx}, {fy})");
-        let wall = view.pixel(&map, 0.05, 1.45);
+        let wall = view.pixel(&map, 0.05, 0.05);
         assert_eq!(
-            img.get_pixel(wall.0 as u32 + 2, wall.1 as u32 + 2).0,
+            img.get_pixel(wall.0 as u32 + 2, wall.1 as u32 - 2).0,
             [0, 0, 0],
-            "the map's top-left wall is black"
+            "the map's bottom-left wall is black (the final-error box covers the top-left)"
         );
         let curve = |p: &Rgb<u8>| p.0 == [180, 30, 30];
         let right_panel = (MAP_PANEL.0 as u32 + MAP_PANEL.2 + 15)..SIZE.0;
@@ -366,6 +429,17 @@ mod tests {
             .filter(|&(x, y)| curve(img.get_pixel(x, y)))
             .count();
         assert!(drawn > 200, "both error curves are drawn in the right panel ({drawn} curve pixels)");
+        let orange = |p: &Rgb<u8>| p.0 == [ESTIMATE.0, ESTIMATE.1, ESTIMATE.2];
+        let first = &record.log.truth[1];
+        assert!(
+            !near(&img, view.pixel(&map, first.x, first.y), 0, orange),
+            "the true path is drawn over the estimate, not hidden under it"
+        );
+        assert_eq!(
+            particles_label(&record.log),
+            "particles at step 1 (50 of 200 drawn)",
+            "subsampling is said"
+        );
         let png = encode_png(&img).expect("encode");
         assert!(image::load_from_memory(&png).is_ok(), "PNG decodes");
     }

@@ -31,7 +31,8 @@ pub enum ReplayError {
 
     /// Tracking and semi-global need to know roughly where the robot starts.
     #[error(
-        "task {task:?} needs an initial pose: pass --init x,y,θ or record `truth` on the log's first line (or use task global)"
+        "task {} needs an initial pose: pass --init x,y,θ or record `truth` on the log's first line (or use --task global)",
+        task.name()
     )]
     NoInitialPose { task: Task },
 

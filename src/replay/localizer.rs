@@ -26,6 +26,7 @@ use crate::particles::{
     should_resample, weigh_likelihood_field,
 };
 use crate::replay::error::ReplayError;
+use crate::replay::fit::scan_fit;
 use crate::replay::log::{EstimateLine, LogLine};
 use crate::sense::LidarScan;
 use crate::world::map::{DistanceField, TraversableMap};
@@ -103,6 +104,8 @@ pub struct Localizer {
     rng: Pcg64Mcg,
     health: FilterHealth,
     estimate: PoseEstimate,
+    /// What the initial set was drawn around (`None`: uniform over the map).
+    start_centre: Option<Pose2>,
     fell_back_to_global: bool,
 }
 
@@ -132,10 +135,21 @@ impl Localizer {
                 draw_around_guess(&params.init, Some(guess), &map, &traversable, &mut rng)?
             }
         };
-        let (set, fell_back_to_global) = (drawn.set, drawn.fell_back_to_global);
+        let (set, start_centre, fell_back_to_global) = (drawn.set, drawn.guess, drawn.fell_back_to_global);
         let estimate = estimate_pose(&set).unwrap_or_default();
         let health = FilterHealth { reinitialisations: u32::from(fell_back_to_global), ..Default::default() };
-        Ok(Self { map, field, traversable, set, params, rng, health, estimate, fell_back_to_global })
+        Ok(Self {
+            map,
+            field,
+            traversable,
+            set,
+            params,
+            rng,
+            health,
+            estimate,
+            start_centre,
+            fell_back_to_global,
+        })
     }
 
     /// One filter step: moves every particle by `odom_delta` (the odometry motion since the
@@ -203,6 +217,12 @@ impl Localizer {
         self.health
     }
 
+    /// The pose the initial set was drawn around (for a perturbed truth, after the perturbation);
+    /// `None` for a draw over the whole map.
+    pub fn start_centre(&self) -> Option<Pose2> {
+        self.start_centre
+    }
+
     /// Whether the semi-global box held no traversable cell and the set was drawn globally.
     pub fn fell_back_to_global(&self) -> bool {
         self.fell_back_to_global
@@ -210,6 +230,11 @@ impl Localizer {
 
     pub fn map(&self) -> &OccupancyMap {
         &self.map
+    }
+
+    /// How well `scan` fits the map seen from `pose` ([`scan_fit`]).
+    pub fn scan_fit(&self, scan: &LidarScan, pose: &Pose2) -> Option<f32> {
+        scan_fit(scan, pose, &self.map, &self.field)
     }
 
     pub fn traversable(&self) -> &TraversableMap {

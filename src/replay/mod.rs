@@ -1,11 +1,14 @@
 //! Offline replay: localize recorded data without the simulator. `log` reads and writes the JSON
 //! Lines formats (ROS LaserScan fields + odometry pose in, one estimate per line out);
-//! `localizer` is the classical particle filter as a plain struct (`Localizer::new`, `update`).
+//! `localizer` is the classical particle filter as a plain struct (`Localizer::new`, `update`);
+//! `fit` tells whether a log's scans belong to the map.
 
 mod error;
+mod fit;
 mod localizer;
 mod log;
 
 pub use error::ReplayError;
+pub use fit::{FIT_TOLERANCE_M, MIN_FIT, scan_fit};
 pub use localizer::{InitialGuess, Localizer, LocalizerParams};
 pub use log::{EstimateLine, LogLine, parse_line, parse_log, read_log, to_jsonl};

@@ -17,7 +17,7 @@
 //! `eval.seed` is ignored: each job runs with one of `seeds`. `out` is relative to this file
 //! (`apfn sweep --out DIR` overrides it).
 
-use crate::compose::read_ron;
+use crate::compose::{read_ron, relative_to_file};
 use crate::eval::{EvalConfig, LoadedEval};
 use crate::sweep::error::SweepError;
 use serde::{Deserialize, Serialize};
@@ -65,8 +65,7 @@ impl SweepConfig {
         {
             return Err(invalid("seeds", format!("seed {seed} is listed twice; expected distinct seeds")));
         }
-        let base = path.parent().unwrap_or(Path::new("."));
-        let out = base.join(&self.out);
+        let out = relative_to_file(path, &self.out);
         let eval = self.eval.clone().into_loaded(path)?;
         Ok(LoadedSweep { path: path.to_owned(), config: self, eval, out })
     }

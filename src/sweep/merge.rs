@@ -1,11 +1,13 @@
 //! `--merge`: gathers the job result files and reduces each cell across its seeds to the mean
-//! and 95 % confidence interval of every metric.
+//! and 95 % confidence interval of every error metric, and its success rate over all its
+//! episodes with a Wilson interval.
 
 use crate::eval::ResultRow;
 use crate::particles::Task;
 use crate::sweep::config::LoadedSweep;
 use crate::sweep::error::SweepError;
 use crate::sweep::jobs::Job;
+use crate::sweep::proportion::Proportion;
 use crate::sweep::result::{JobResult, JobStatus, job_status};
 use crate::sweep::stats::{MeanCi, mean_ci};
 use serde::{Deserialize, Serialize};
@@ -32,7 +34,8 @@ pub struct SweepRow {
     pub final_pos_err_m: MeanCi,
     pub mean_orient_err_rad: MeanCi,
     pub final_orient_err_rad: MeanCi,
-    pub success_rate: MeanCi,
+    /// Successful episodes pooled over the seeds, with their Wilson interval.
+    pub success: Proportion,
     /// Summed wall-clock seconds of the cell's jobs.
     pub wall_s: f64,
 }
@@ -98,9 +101,17 @@ fn reduce(members: &[&JobResult]) -> SweepRow {
         final_pos_err_m: stat(|r| r.final_pos_err_m),
         mean_orient_err_rad: stat(|r| r.mean_orient_err_rad),
         final_orient_err_rad: stat(|r| r.final_orient_err_rad),
-        success_rate: stat(|r| r.success_rate),
+        success: pooled_success(members),
         wall_s: members.iter().map(|m| m.wall_s).sum(),
     }
+}
+
+/// Each job's rate × its episodes, summed: the rate over every episode of the cell.
+fn pooled_success(members: &[&JobResult]) -> Proportion {
+    let successes =
+        members.iter().map(|m| (m.row.success_rate * m.row.episodes as f32).round() as usize).sum();
+    let trials = members.iter().map(|m| m.row.episodes).sum();
+    Proportion::wilson(successes, trials).expect("a job runs at least 1 episode")
 }
 
 #[cfg(test)]
@@ -146,7 +157,12 @@ mod tests {
         assert!((rows[0].mean_pos_err_m.mean - 2.0).abs() < 1e-9);
         let ci = rows[0].mean_pos_err_m.ci95.expect("three seeds give a CI");
         assert!((ci - 4.303 / 3f64.sqrt()).abs() < 1e-6, "ci {ci}");
-        assert_eq!(rows[0].success_rate.ci95, Some(0.0), "identical values: zero-width interval");
+        let success = rows[0].success;
+        assert_eq!((success.successes, success.trials), (6, 6), "pooled over 3 seeds × 2 episodes");
+        assert!(
+            success.low95 > 0.5 && success.high95 == 1.0,
+            "6 of 6: a Wilson interval below 1: {success:?}"
+        );
         assert_eq!((rows[1].n, rows[1].mean_pos_err_m.ci95), (1, None), "one seed: no interval");
         assert_eq!(rows[0].wall_s, 3.0);
     }

@@ -1,5 +1,6 @@
 //! Writes a merged sweep: sweep.json (rows), sweep.csv (one `_mean` and one `_ci95` column per
-//! metric) and sweep.md (one line per cell, "mean ± half-width").
+//! error metric, the success rate with its Wilson bounds) and sweep.md (one line per cell,
+//! "mean ± half-width", success "rate (low–high)").
 
 use crate::sweep::error::SweepError;
 use crate::sweep::merge::SweepRow;
@@ -8,14 +9,13 @@ use crate::world::map::write_atomically;
 use std::path::Path;
 
 /// The metrics of a row, with their column names, in table order.
-fn metrics(r: &SweepRow) -> [(&'static str, MeanCi); 6] {
+fn metrics(r: &SweepRow) -> [(&'static str, MeanCi); 5] {
     [
         ("mean_pos_err_m", r.mean_pos_err_m),
         ("rmse_pos_m", r.rmse_pos_m),
         ("final_pos_err_m", r.final_pos_err_m),
         ("mean_orient_err_rad", r.mean_orient_err_rad),
         ("final_orient_err_rad", r.final_orient_err_rad),
-        ("success_rate", r.success_rate),
     ]
 }
 
@@ -47,7 +47,7 @@ pub fn csv(rows: &[SweepRow]) -> Result<Vec<u8>, csv::Error> {
         header
             .extend(metrics(r).iter().flat_map(|(name, _)| [format!("{name}_mean"), format!("{name}_ci95")]));
     }
-    header.push("wall_s".into());
+    header.extend(["success_rate", "success_low95", "success_high95", "wall_s"].map(String::from));
     writer.write_record(&header)?;
     for r in rows {
         let seeds: Vec<String> = r.seeds.iter().map(u64::to_string).collect();
@@ -67,6 +67,8 @@ pub fn csv(rows: &[SweepRow]) -> Result<Vec<u8>, csv::Error> {
             record.push(format!("{:.5}", m.mean));
             record.push(m.ci95.map_or(String::new(), |c| format!("{c:.5}")));
         }
+        let s = r.success;
+        record.extend([s.rate, s.low95, s.high95].map(|x| format!("{x:.5}")));
         record.push(format!("{:.1}", r.wall_s));
         writer.write_record(&record)?;
     }
@@ -83,10 +85,11 @@ fn cell(m: MeanCi, scale: f64, decimals: usize) -> String {
 
 pub fn markdown(rows: &[SweepRow]) -> String {
     let mut text = String::from(
-        "Mean across seeds ± half-width of its 95 % confidence interval (Student t, n − 1 degrees of \
-         freedom). Errors are averaged over all steps of all episodes.\n\n\
+        "Errors: mean across seeds ± half-width of its 95 % confidence interval (Student t, n − 1 \
+         degrees of freedom), each seed's error averaged over all steps of all episodes. Success: \
+         the rate over all episodes of all seeds, with its 95 % Wilson interval.\n\n\
          | schedule | localizer | policy | task | split | n | pos err (cm) | final pos err (cm) | \
-         orient err (rad) | success (%) |\n|---|---|---|---|---|---|---|---|---|---|\n",
+         orient err (rad) | success (95 % CI) |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         text += &format!(
@@ -100,7 +103,7 @@ pub fn markdown(rows: &[SweepRow]) -> String {
             cell(r.mean_pos_err_m, 100.0, 1),
             cell(r.final_pos_err_m, 100.0, 1),
             cell(r.mean_orient_err_rad, 1.0, 3),
-            cell(r.success_rate, 100.0, 0),
+            r.success.percent(),
         );
     }
     text
