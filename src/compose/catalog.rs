@@ -3,7 +3,8 @@
 
 use crate::act::{drive, physics};
 use crate::agent::{
-    AvoidParams, GoalnavParams, TurnParams, avoid_policy, goalnav_policy, random_policy, turn_policy,
+    AvoidParams, GoalnavParams, InfogainParams, TurnParams, avoid_policy, goalnav_policy, infogain_policy,
+    random_policy, turn_policy,
 };
 use crate::belief::{BeliefParams, belief_crop};
 use crate::compose::registry::{NoParams, Registry, SystemSpec};
@@ -188,6 +189,10 @@ pub fn standard_registry() -> Registry {
     .register::<GoalnavParams, _, _>(
         spec("goalnav_policy", Agent, "Reads TruePose (or PoseEstimate), EpisodeStart, the map's TraversableMap, ScenarioRng. Writes GoalPlan, Action.", &[], &["Action"]),
         goalnav_policy,
+    )
+    .register::<InfogainParams, _, _>(
+        spec("infogain_policy", Agent, "Reads ParticleSet, the map's RayGrid, DistanceField and TraversableMap, the filter's LidarParams, LikelihoodFieldParams and TransitionParams, ScenarioRng. Writes Action.", &["ParticleSet"], &["Action"]),
+        infogain_policy,
     )
     .register::<NoParams, _, _>(
         spec("drive", Act, "Reads Action, RobotParams. Writes DriveCommand.", &["Action"], &["DriveCommand"]),
