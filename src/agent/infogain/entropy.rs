@@ -14,6 +14,9 @@
 use crate::world::{Pose2, wrap_angle};
 use std::f32::consts::TAU;
 
+/// Log-weights this far below the largest are left out of the histogram.
+const NEGLIGIBLE_LOG_W: f32 = -30.0;
+
 /// Entropy −Σ_b W_b ln W_b, in nats, of the weighted poses over bins of `bin_m` × `bin_m` ×
 /// `bin_rad` with `centre` in the middle of its bin (heading bins wrap around; `bin_rad` should
 /// divide 2π). `log_w` need not be normalised (log-sum-exp inside). Particles with a non-finite
@@ -35,8 +38,10 @@ pub fn histogram_entropy(
     }
     let bin = |offset: f32, size: f32| (offset / size + 0.5).floor() as i32;
     let headings = ((TAU / bin_rad).round() as i32).max(1);
+    // Weights below e^−30 of the largest change the entropy by < 1e-11 nats; leaving them out
+    // shortens the sort, which was a sixth of a decision (perf on `benches/infogain.rs`).
     let mut mass: Vec<((i32, i32, i32), f64)> = (0..log_w.len())
-        .filter(|&k| usable(k))
+        .filter(|&k| usable(k) && log_w[k] - max > NEGLIGIBLE_LOG_W)
         .map(|k| {
             let turn = bin(wrap_angle(yaw[k] - centre.yaw), bin_rad).rem_euclid(headings);
             let key = (bin(x[k] - centre.x, bin_m), bin(y[k] - centre.y, bin_m), turn);

@@ -108,6 +108,8 @@ pub fn score_candidates(
                     (pose, collided, distance) =
                         (step.pose, collided | step.collided, distance + step.distance_m);
                 }
+                // The starting log-weights are all equal, so scaling them all tempers the likelihood.
+                moved.log_w.iter_mut().for_each(|l| *l *= params.likelihood_scale);
                 let (m, bin_m) = (&moved, params.bin_size_m);
                 entropy += histogram_entropy(&m.x, &m.y, &m.yaw, &m.log_w, pose, bin_m, bin_rad);
                 collisions += usize::from(collided);
@@ -214,7 +216,7 @@ mod tests {
     /// Expected entropy of standing still for one step, with exact transitions, for a belief of
     /// two particles `a` (weight 3/4) and `b` (1/4): 4 hypotheses and 4 particles are drawn
     /// A, A, A, B by the systematic draw whatever its offset.
-    fn stand_still_entropy(layers: &Layers, a: Pose2, b: Pose2) -> f32 {
+    fn stand_still_entropy(layers: &Layers, a: Pose2, b: Pose2, likelihood_scale: f32) -> f32 {
         let mut set = ParticleSet::from_poses(&[a, b]);
         set.log_w = vec![0.75f32.ln(), 0.25f32.ln()];
         let params = InfogainParams {
@@ -222,6 +224,7 @@ mod tests {
             horizon_steps: 1,
             hypotheses: 4,
             particles: 4,
+            likelihood_scale,
             ..Default::default()
         };
         let transition = TransitionParams { trans_noise_m: 0.0, rot_noise_deg: 0.0 };
@@ -248,11 +251,11 @@ mod tests {
         let a = Pose2::new(0.5, 1.1, 0.3);
         let b = Pose2::new(2.0 - a.x, 1.5 - a.y, crate::world::wrap_angle(a.yaw + std::f32::consts::PI));
         let by_hand = -(0.75f32 * 0.75f32.ln() + 0.25 * 0.25f32.ln());
-        let h = stand_still_entropy(&Layers::of(room(false)), a, b);
+        let h = stand_still_entropy(&Layers::of(room(false)), a, b, 1.0);
         assert!((h - by_hand).abs() < 0.01, "symmetric room: expected entropy {h}, by hand {by_hand}");
         // With the pillar the scans differ. By hand: hypothesis h's scan z_h gives particle k
-        // the log-likelihood l(h, k); the posterior of hypothesis h puts 3·e^l(h,a) on a's bin
-        // and e^l(h,b) on b's, and the expected entropy is (3·H(post_a) + H(post_b)) / 4.
+        // the log-likelihood l(h, k); the posterior of hypothesis h puts 3·e^(s·l(h,a)) on a's bin
+        // and e^(s·l(h,b)) on b's (s = likelihood_scale), and the expected entropy is (3·H(post_a) + H(post_b)) / 4.
         let layers = Layers::of(room(true));
         let log_likelihood = |h: Pose2, k: Pose2| {
             let lidar = LidarParams { rays: 24, ..Default::default() };
@@ -268,11 +271,21 @@ mod tests {
             let p = 1.0 / (1.0 + (log_mass_b - log_mass_a).exp());
             -(p * p.ln() + (1.0 - p) * (1.0 - p).max(f32::MIN_POSITIVE).ln())
         };
-        let posterior = |h: Pose2| binary_entropy(3f32.ln() + log_likelihood(h, a), log_likelihood(h, b));
-        let by_hand = (3.0 * posterior(a) + posterior(b)) / 4.0;
-        let h = stand_still_entropy(&layers, a, b);
-        assert!((h - by_hand).abs() < 1e-3, "pillar: expected entropy {h}, by hand {by_hand}");
-        assert!(h < 0.5 * 0.5623, "the pillar must tell the poses apart: {h}");
+        let by_hand = |s: f32| {
+            let posterior =
+                |h: Pose2| binary_entropy(3f32.ln() + s * log_likelihood(h, a), s * log_likelihood(h, b));
+            (3.0 * posterior(a) + posterior(b)) / 4.0
+        };
+        for s in [1.0, InfogainParams::default().likelihood_scale] {
+            let h = stand_still_entropy(&layers, a, b, s);
+            assert!(
+                (h - by_hand(s)).abs() < 1e-3,
+                "pillar, scale {s}: expected entropy {h}, by hand {}",
+                by_hand(s)
+            );
+        }
+        let h = stand_still_entropy(&layers, a, b, 1.0);
+        assert!(h < 0.5 * 0.5623, "untempered, the pillar tells the poses apart: {h}");
     }
 
     #[test]
