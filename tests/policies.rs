@@ -1,4 +1,4 @@
-//! Every baseline schedule (`systems/{turn,avoid,goalnav,random,mcl_passive}.ron`) runs through
+//! Every baseline schedule (`systems/{turn,avoid,goalnav,random,mcl_passive,infogain}.ron`) runs through
 //! the users' entry points (`Scene::into_loaded`, `Pipeline::load`, `headless_app`) for 40 agent
 //! steps on one procedural apartment with two robots, and the robots move as the policy says.
 
@@ -91,6 +91,16 @@ fn mcl_passive_drives_like_goalnav() {
 }
 
 #[test]
+fn infogain_keeps_off_the_walls() {
+    // From a tracking start the belief is tight: the policy may turn or drive, but its collision
+    // cost keeps it off the walls.
+    let run = run("infogain");
+    for (k, collisions) in run.collisions.iter().enumerate() {
+        assert!(*collisions <= STEPS / 10, "infogain: robot {k} collided on {collisions} of {STEPS} steps");
+    }
+}
+
+#[test]
 fn random_runs_with_finite_estimates() {
     let run = run("random");
     assert_eq!(run.poses.iter().map(Vec::len).collect::<Vec<_>>(), vec![STEPS; 2], "every step recorded");
@@ -98,7 +108,7 @@ fn random_runs_with_finite_estimates() {
 
 #[test]
 fn baseline_schedules_say_what_they_test() {
-    for name in ["turn", "avoid", "goalnav", "random", "mcl_passive"] {
+    for name in ["turn", "avoid", "goalnav", "random", "mcl_passive", "infogain"] {
         let text = std::fs::read_to_string(schedule(name)).expect("schedule file exists");
         let first = text.lines().next().unwrap_or_default();
         assert!(

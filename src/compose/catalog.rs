@@ -6,7 +6,8 @@ use crate::agent::sac::{
     RewardParams, SacPolicyParams, SacUpdateParams, localization_reward, sac_policy, sac_update,
 };
 use crate::agent::{
-    AvoidParams, GoalnavParams, TurnParams, avoid_policy, goalnav_policy, random_policy, turn_policy,
+    AvoidParams, GoalnavParams, InfogainParams, TurnParams, avoid_policy, goalnav_policy, infogain_policy,
+    random_policy, turn_policy,
 };
 use crate::belief::{BeliefParams, belief_crop};
 use crate::compose::registry::{NoParams, Registry, SystemSpec};
@@ -201,6 +202,10 @@ pub fn standard_registry() -> Registry {
     .register::<GoalnavParams, _, _>(
         spec("goalnav_policy", Agent, "Reads TruePose (or PoseEstimate), EpisodeStart, the map's TraversableMap, ScenarioRng. Writes GoalPlan, Action.", &[], &["Action"]),
         goalnav_policy,
+    )
+    .register::<InfogainParams, _, _>(
+        spec("infogain_policy", Agent, "Reads ParticleSet, the map's RayGrid, DistanceField and TraversableMap, the filter's LidarParams, LikelihoodFieldParams and TransitionParams, ScenarioRng. Writes Action.", &["ParticleSet"], &["Action"]),
+        infogain_policy,
     )
     .register::<SacPolicyParams, _, _>(
         spec(
