@@ -7,12 +7,13 @@ use crate::compose::read_ron;
 use crate::nn::checkpoint::Checkpoint;
 use crate::nn::pfnet::{GradBuffers, Workspaces};
 use crate::train::curves::loss_curves_png;
+use crate::train::log::{read_log, write_log};
 use crate::train::pfnet::{BatchBuffers, TrainPfNetConfig, TrainState, simulate_data, validation_loss};
 use crate::world::map::write_atomically;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 #[derive(clap::Args, Clone, Debug, PartialEq)]
@@ -133,25 +134,5 @@ pub fn run(args: TrainPfNetArgs) -> anyhow::Result<()> {
         last.display(),
         log_path.display()
     );
-    Ok(())
-}
-
-fn read_log(path: &Path) -> anyhow::Result<Vec<LogRow>> {
-    if !path.exists() {
-        return Ok(vec![]);
-    }
-    let mut reader = csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
-    reader
-        .deserialize()
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("{}: not a training log", path.display()))
-}
-
-fn write_log(path: &Path, rows: &[LogRow]) -> anyhow::Result<()> {
-    let mut writer = csv::Writer::from_writer(vec![]);
-    for row in rows {
-        writer.serialize(row)?;
-    }
-    write_atomically(path, &writer.into_inner()?)?;
     Ok(())
 }

@@ -6,6 +6,7 @@
 use crate::cli::set_threads;
 use crate::compose::read_ron;
 use crate::train::curves::{CurveLabels, curves_png};
+use crate::train::log::{read_log, write_log};
 use crate::train::sac::{SacTrainer, TrainSacConfig};
 use crate::world::map::write_atomically;
 use anyhow::Context;
@@ -173,25 +174,5 @@ fn write_curves(out: &Path, rows: &[LogRow], trainer: &SacTrainer) -> anyhow::Re
     };
     let title = format!("APFN agent, {} SAC (trailing mean of {SMOOTH} logs)", trainer.config.network);
     write_atomically(&out.join("train_curves.png"), &curves_png(&points, &title, &labels)?)?;
-    Ok(())
-}
-
-fn read_log(path: &Path) -> anyhow::Result<Vec<LogRow>> {
-    if !path.exists() {
-        return Ok(vec![]);
-    }
-    let mut reader = csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
-    reader
-        .deserialize()
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("{}: not a training log", path.display()))
-}
-
-fn write_log(path: &Path, rows: &[LogRow]) -> anyhow::Result<()> {
-    let mut writer = csv::Writer::from_writer(vec![]);
-    for row in rows {
-        writer.serialize(row)?;
-    }
-    write_atomically(path, &writer.into_inner()?)?;
     Ok(())
 }

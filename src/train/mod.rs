@@ -4,5 +4,6 @@
 pub mod collect;
 pub mod curves;
 pub mod episodes;
+pub mod log;
 pub mod pfnet;
 pub mod sac;
