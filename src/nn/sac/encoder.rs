@@ -6,6 +6,7 @@ use crate::nn::conv::{Conv2d, Padding};
 use crate::nn::dense::Dense;
 use crate::nn::params::Params;
 use crate::nn::sac::layer::WeightBias;
+use crate::nn::sac::zeroed;
 
 #[derive(Clone, Debug, PartialEq)]
 struct ConvLayer {
@@ -118,22 +119,22 @@ impl ImageEncoder {
         grads: &mut [f32],
     ) {
         let EncoderActivations { conv_out, features, d_pre, d_input, scratch } = acts;
-        reset(d_pre, features.len());
+        zeroed(d_pre, features.len());
         relu_backward(features, d_features, d_pre);
         let last = conv_out.last().expect("forward ran");
-        reset(d_input, last.len());
+        zeroed(d_input, last.len());
         let (dw, db) = self.dense_wb.split_mut(grads);
         self.dense.backward(self.dense_wb.weight(values), last, n, d_pre, dw, db, Some(d_input));
         for (i, l) in self.convs.iter().enumerate().rev() {
             // d_input holds d(post-ReLU output of layer i); through the ReLU into d_pre.
-            reset(d_pre, conv_out[i].len());
+            zeroed(d_pre, conv_out[i].len());
             relu_backward(&conv_out[i], d_input, d_pre);
             let input = if i == 0 { x } else { &conv_out[i - 1] };
             let (dw, db) = l.wb.split_mut(grads);
             let dx = if i == 0 {
                 None
             } else {
-                reset(d_input, input.len());
+                zeroed(d_input, input.len());
                 Some(&mut d_input[..])
             };
             l.conv.backward(
@@ -152,12 +153,6 @@ impl ImageEncoder {
             );
         }
     }
-}
-
-/// Zeroes `buf` at length `len` (backward passes accumulate).
-fn reset(buf: &mut Vec<f32>, len: usize) {
-    buf.clear();
-    buf.resize(len, 0.0);
 }
 
 #[cfg(test)]

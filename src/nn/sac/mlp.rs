@@ -4,6 +4,7 @@ use crate::nn::activation::{relu_backward, relu_forward};
 use crate::nn::dense::Dense;
 use crate::nn::params::Params;
 use crate::nn::sac::layer::WeightBias;
+use crate::nn::sac::zeroed;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Mlp {
@@ -85,8 +86,7 @@ impl Mlp {
         d_out.extend_from_slice(d_output);
         for (i, (d, wb)) in self.layers.iter().enumerate().rev() {
             let input = if i == 0 { x } else { &outputs[i - 1] };
-            d_in.clear();
-            d_in.resize(n * d.inputs, 0.0);
+            zeroed(d_in, n * d.inputs);
             let w = wb.weight(values);
             match grads.as_deref_mut() {
                 Some(g) => {
@@ -99,8 +99,7 @@ impl Mlp {
                 break;
             }
             // Through the ReLU of the layer below: d_out ← d_in · [y > 0].
-            d_out.clear();
-            d_out.resize(d_in.len(), 0.0);
+            zeroed(d_out, d_in.len());
             relu_backward(input, d_in, d_out);
         }
         if let Some(dx) = dx {

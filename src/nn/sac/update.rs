@@ -14,6 +14,7 @@ use crate::nn::sac::config::ACTION_LEN;
 use crate::nn::sac::mlp::MlpActivations;
 use crate::nn::sac::networks::{FeatureWorkspace, Observations, SacNetworks};
 use crate::nn::sac::tanh_gaussian::{self, HEAD_LEN};
+use crate::nn::sac::zeroed;
 use serde::{Deserialize, Serialize};
 
 /// SAC's hyper-parameters; defaults are the paper's.
@@ -186,8 +187,8 @@ impl SacLearner {
         // y = r + γ (1 − d) (min_i Q̄_i(s′, a′) − α log π(a′|s′)),  a′ ~ π(·|s′).
         nets.encode(values, &batch.next_obs, &mut ws.next_encoders, &mut ws.next_features);
         nets.actor.forward(values, &ws.next_features, n, &mut ws.actor);
-        resize(&mut ws.next_actions, n * ACTION_LEN);
-        resize(&mut ws.next_log_prob, n);
+        zeroed(&mut ws.next_actions, n * ACTION_LEN);
+        zeroed(&mut ws.next_log_prob, n);
         tanh_gaussian::sample(ws.actor.output(), next_noise, &mut ws.next_actions, &mut ws.next_log_prob);
         nets.encode(target, &batch.next_obs, &mut ws.next_encoders, &mut ws.target_features);
         concat(&ws.target_features, &ws.next_actions, f, &mut ws.critic_input);
@@ -203,10 +204,10 @@ impl SacLearner {
         }));
 
         // Critic loss: Σ_i mean (Q_i(s, a) − y)², into the critics and the encoders.
-        resize(&mut ws.grads, values.len());
+        zeroed(&mut ws.grads, values.len());
         nets.encode(values, &batch.obs, &mut ws.encoders, &mut ws.features);
         concat(&ws.features, batch.actions, f, &mut ws.critic_input);
-        resize(&mut ws.d_critic_input, n * (f + ACTION_LEN));
+        zeroed(&mut ws.d_critic_input, n * (f + ACTION_LEN));
         let (mut critic_loss, mut q_mean) = (0.0, 0.0);
         for (i, (critic, acts)) in nets.critics.iter().zip(&mut ws.critics).enumerate() {
             critic.forward(values, &ws.critic_input, n, acts);
@@ -233,8 +234,8 @@ impl SacLearner {
         // Actor loss: mean (α log π(ã|s) − min_i Q_i(s, ã)),  ã ~ π(·|s), on stopped features,
         // through the critics without training them.
         nets.actor.forward(values, &ws.features, n, &mut ws.actor);
-        resize(&mut ws.pi_actions, n * ACTION_LEN);
-        resize(&mut ws.log_prob, n);
+        zeroed(&mut ws.pi_actions, n * ACTION_LEN);
+        zeroed(&mut ws.log_prob, n);
         tanh_gaussian::sample(ws.actor.output(), pi_noise, &mut ws.pi_actions, &mut ws.log_prob);
         concat(&ws.features, &ws.pi_actions, f, &mut ws.critic_input);
         for (critic, (acts, q)) in nets.critics.iter().zip(ws.critics.iter_mut().zip(&mut ws.q)) {
@@ -244,7 +245,7 @@ impl SacLearner {
         }
         let [q1, q2] = &ws.q;
         let actor_loss = (0..n).map(|k| alpha * ws.log_prob[k] - q1[k].min(q2[k])).sum::<f32>() / n as f32;
-        resize(&mut ws.d_critic_input, n * (f + ACTION_LEN));
+        zeroed(&mut ws.d_critic_input, n * (f + ACTION_LEN));
         for (i, (critic, acts)) in nets.critics.iter().zip(&mut ws.critics).enumerate() {
             // The minimum's gradient flows through the smaller critic only.
             ws.d_q.clear();
@@ -258,7 +259,7 @@ impl SacLearner {
         ws.d_actions.extend(ws.d_critic_input.chunks_exact(f + ACTION_LEN).flat_map(|row| &row[f..]));
         ws.d_log_prob.clear();
         ws.d_log_prob.resize(n, alpha / n as f32);
-        resize(&mut ws.d_head, n * HEAD_LEN);
+        zeroed(&mut ws.d_head, n * HEAD_LEN);
         tanh_gaussian::backward(
             ws.actor.output(),
             pi_noise,
@@ -272,12 +273,6 @@ impl SacLearner {
         let mean_log_prob = ws.log_prob.iter().sum::<f32>() / n as f32;
         UpdateStats { critic_loss, actor_loss, alpha, q: q_mean, entropy: -mean_log_prob }
     }
-}
-
-/// Zeroes `buf` at length `len`.
-fn resize(buf: &mut Vec<f32>, len: usize) {
-    buf.clear();
-    buf.resize(len, 0.0);
 }
 
 /// Rows of `features` `[n][f]` ⊕ `actions` `[n][2]` into `out` `[n][f + 2]`.
