@@ -36,6 +36,7 @@ fn run(
         seed,
         episode: apfn::episode::EpisodeParams { steps, ..Default::default() },
         robot: Default::default(),
+        swaps: Vec::new(),
         overrides: Vec::new(),
         localizer: None,
     };

@@ -115,6 +115,24 @@ fn eval_overrides_reach_every_schedule_and_rename_the_localizer() {
 }
 
 #[test]
+fn eval_swaps_replace_a_step_in_every_schedule() {
+    let dir = tempfile::tempdir().unwrap();
+    let turn = concat!(env!("CARGO_MANIFEST_DIR"), "/systems/turn.ron");
+    let text = format!(
+        "Eval(schedules: [{SCHEDULE:?}, {turn:?}], tasks: [tracking], maps: [Apartments(split: seen, count: 1)], \
+         episodes: 2, robots_per_map: 2, episode: (steps: 4), \
+         swaps: [(\"mcl_likelihood_field\", \"mcl_beam_model\", ())])"
+    );
+    let config = write(dir.path(), "beam.ron", &text);
+    let out = dir.path().join("beam");
+    apfn(&["eval", "--config", &config, "--out", out.to_str().unwrap()]).unwrap();
+    let rows: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let localizers: Vec<_> = rows.iter().map(|r| r["localizer"].as_str().unwrap()).collect();
+    assert_eq!(localizers, ["mcl_beam", "mcl_beam"], "both schedules run the swapped-in beam model");
+}
+
+#[test]
 fn broken_scene_names_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
     let scene =
@@ -180,6 +198,22 @@ fn bad_eval_configs_fail_before_any_work() {
                  overrides: [(\"resample\", (alpha: 3.0))])"
             ),
             "resample.alpha",
+        ),
+        (
+            "swap into another stage",
+            format!(
+                "Eval(schedules: [{SCHEDULE:?}], maps: [Apartments(split: seen, count: 1)], \
+                 swaps: [(\"mcl_likelihood_field\", \"lidar\", ())])"
+            ),
+            "swaps[0] (`mcl_likelihood_field` → `lidar`)",
+        ),
+        (
+            "swap of a step no schedule runs",
+            format!(
+                "Eval(schedules: [{SCHEDULE:?}], maps: [Apartments(split: seen, count: 1)], \
+                 swaps: [(\"mcl_beam_model\", \"mcl_likelihood_field\", ())])"
+            ),
+            "no schedule of this config runs `mcl_beam_model`",
         ),
         (
             "no tasks",

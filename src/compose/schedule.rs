@@ -101,20 +101,38 @@ impl Pipeline {
         Ok(())
     }
 
-    /// Replaces the parameters of step `name` by `params` (RON text, fields left out take the
-    /// system's defaults), decoded and checked as a schedule file's own. Returns whether this
-    /// pipeline runs the step; errors name the system's problem with the text.
-    pub fn set_params(&mut self, name: &str, params: &str, registry: &Registry) -> Result<bool, String> {
-        let Some(entry) = registry.get(name) else {
-            let hint = registry.nearest(name).map(|n| format!(" (did you mean `{n}`?)")).unwrap_or_default();
-            return Err(format!("unknown system `{name}`{hint}"));
+    /// Puts system `new` with `params` in the slot of step `old` (e.g. `pfnet_likelihood` for
+    /// `mcl_likelihood_field`), then checks the schedule again: the new step must fit the slot's
+    /// stage and find what it needs earlier; `new` = `old` just changes its parameters (fields
+    /// left out take the system's defaults). Returns whether this pipeline runs `old`.
+    pub fn replace_step(
+        &mut self,
+        old: &str,
+        new: &str,
+        params: &str,
+        registry: &Registry,
+    ) -> Result<bool, String> {
+        let known = |name: &str| {
+            registry.get(name).ok_or_else(|| {
+                let hint =
+                    registry.nearest(name).map(|n| format!(" (did you mean `{n}`?)")).unwrap_or_default();
+                format!("unknown system `{name}`{hint}")
+            })
         };
-        let Some(step) = self.steps.iter_mut().find(|s| s.name == entry.name) else {
+        let (old_entry, new_entry) = (known(old)?, known(new)?);
+        let Some(index) = self.steps.iter().position(|s| s.name == old_entry.name) else {
             return Ok(false);
         };
         let mut de = ron::Deserializer::from_str(params).map_err(|e| e.to_string())?;
         let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
-        step.system = entry.parse_params(&mut erased).map_err(|e| format!("parameters of `{name}`: {e}"))?;
+        let system =
+            new_entry.parse_params(&mut erased).map_err(|e| format!("parameters of `{new}`: {e}"))?;
+        let replaced = PipelineStep { name: new_entry.name, stage: new_entry.stage, system };
+        let kept = std::mem::replace(&mut self.steps[index], replaced);
+        if let Err(e) = self.validate(registry) {
+            self.steps[index] = kept; // a failed replacement leaves the schedule as it was
+            return Err(e.to_string());
+        }
         Ok(true)
     }
 
@@ -289,18 +307,24 @@ mod tests {
     }
 
     #[test]
-    fn set_params_replaces_one_step_and_checks_it() {
+    fn replace_step_changes_parameters_or_systems_and_checks_them() {
         let registry = standard_registry();
-        let mut p =
-            parse(r#"Schedule(steps: [("lidar", ()), ("init_particles", ()), ("resample", (alpha: 1.0))])"#)
-                .expect("valid schedule");
-        assert_eq!(p.set_params("resample", "(alpha: 0.25)", &registry), Ok(true));
-        assert!(p.steps[2].system.params_ron().contains("alpha: 0.25"), "{}", p.steps[2].system.params_ron());
-        assert_eq!(p.set_params("depth", "()", &registry), Ok(false), "a step the schedule lacks");
-        let e = p.set_params("resample", "(alpha: 2.0)", &registry).expect_err("out of range");
+        let mut p = parse(
+            r#"Schedule(steps: [("lidar", ()), ("init_particles", ()), ("mcl_likelihood_field", ()), ("resample", (alpha: 1.0))])"#,
+        )
+        .expect("valid schedule");
+        let mut replace = |old, new, params| p.replace_step(old, new, params, &registry);
+        assert_eq!(replace("resample", "resample", "(alpha: 0.25)"), Ok(true));
+        assert_eq!(replace("depth", "depth", "()"), Ok(false), "a step the schedule lacks");
+        let e = replace("resample", "resample", "(alpha: 2.0)").expect_err("out of range");
         assert!(e.contains("resample.alpha"), "{e}");
-        let e = p.set_params("resampel", "()", &registry).expect_err("unknown system");
+        let e = replace("resampel", "resample", "()").expect_err("unknown system");
         assert!(e.contains("did you mean `resample`"), "{e}");
+        assert_eq!(replace("mcl_likelihood_field", "mcl_beam_model", "()"), Ok(true));
+        let e = replace("mcl_beam_model", "pfnet_likelihood", "()").expect_err("no local grid");
+        assert!(e.contains("needs LocalGrid"), "{e}");
+        assert!(p.steps[3].system.params_ron().contains("alpha: 0.25"), "{}", p.steps[3].system.params_ron());
+        assert_eq!(p.names()[2], "mcl_beam_model");
     }
 
     #[test]

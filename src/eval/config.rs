@@ -51,6 +51,11 @@ pub struct EvalConfig {
     /// take the system's defaults.
     #[serde(default)]
     pub overrides: Vec<(String, Box<RawValue>)>,
+    /// Steps that replace another in every schedule that runs it, applied before `overrides`:
+    /// `swaps: [("mcl_likelihood_field", "pfnet_likelihood", (checkpoint: Some("m.safetensors")))]`
+    /// evaluates every policy with PF-net as the localizer from the same schedule files.
+    #[serde(default)]
+    pub swaps: Vec<(String, String, Box<RawValue>)>,
     /// The localizer's name in the tables; `None` derives it from the schedules' likelihood step.
     #[serde(default)]
     pub localizer: Option<String>,
@@ -195,16 +200,23 @@ impl EvalConfig {
                 Ok((p.clone(), pipeline))
             })
             .collect::<Result<Vec<_>, ComposeError>>()?;
-        for (index, (name, params)) in self.overrides.iter().enumerate() {
-            let field = format!("overrides[{index}] (`{name}`)");
+        // An override is a swap of a step for itself with other parameters.
+        let swaps = self.swaps.iter().enumerate().map(|(index, (old, new, params))| {
+            (format!("swaps[{index}] (`{old}` → `{new}`)"), old, new, params)
+        });
+        let overrides =
+            self.overrides.iter().enumerate().map(|(index, (name, params))| {
+                (format!("overrides[{index}] (`{name}`)"), name, name, params)
+            });
+        for (field, old, new, params) in swaps.chain(overrides) {
             let mut applied = false;
             for (_, pipeline) in &mut schedules {
                 applied |= pipeline
-                    .set_params(name, params.get_ron(), &registry)
+                    .replace_step(old, new, params.get_ron(), &registry)
                     .map_err(|message| invalid(&field, message))?;
             }
             if !applied {
-                return Err(invalid(&field, format!("no schedule of this config runs `{name}`")));
+                return Err(invalid(&field, format!("no schedule of this config runs `{old}`")));
             }
         }
         let scenes = self
