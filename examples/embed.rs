@@ -6,8 +6,9 @@
 //! `cargo run --release --example embed`
 
 use apfn::agent::Action;
-use apfn::compose::{NoParams, Pipeline, Registry, Scene, SystemSpec, spawn_scene, standard_registry};
+use apfn::compose::{Pipeline, Registry, Scene, SystemSpec, spawn_scene, standard_registry};
 use apfn::episode::StepError;
+use apfn::params::{NoParams, StepData};
 use apfn::particles::PoseEstimate;
 use apfn::plugin::{ApfnPlugin, ApfnSet};
 use apfn::sense::LidarScan;
@@ -54,8 +55,8 @@ fn registry() -> Registry {
             name: "confident_explorer",
             stage: ApfnSet::Agent,
             summary: "Reads PoseEstimate, LidarScan. Writes Action.",
-            needs: &["PoseEstimate", "LidarScan"],
-            produces: &["Action"],
+            needs: vec![StepData::of::<PoseEstimate>(), StepData::of::<LidarScan>()],
+            produces: vec![StepData::of::<Action>()],
         },
         confident_explorer,
     );

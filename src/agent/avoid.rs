@@ -3,7 +3,7 @@
 //! quarter, and back off while turning when both outer quarters are blocked as well.
 
 use crate::agent::Action;
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use crate::sense::DepthStrip;
 use crate::world::RobotParams;
 use bevy::prelude::*;

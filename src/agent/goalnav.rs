@@ -7,8 +7,8 @@
 
 use crate::act::PhysicsParams;
 use crate::agent::Action;
-use crate::compose::{StepParams, expect_param};
 use crate::episode::EpisodeStart;
+use crate::params::{StepData, StepParams, expect_param};
 use crate::particles::PoseEstimate;
 use crate::world::map::{TraversableMap, plan_path};
 use crate::world::{OccupancyMap, OnMap, Pose2, RobotParams, ScenarioRng, TruePose, wrap_angle};
@@ -75,6 +75,11 @@ impl StepParams for GoalnavParams {
         expect_param(self.reach_m > 0.0, "reach_m", "a radius > 0 m")?;
         expect_param(self.speed_mps.is_finite() && self.speed_mps >= 0.0, "speed_mps", "a speed ≥ 0 m/s")?;
         expect_param(self.clearance_m >= 0.0, "clearance_m", "a clearance ≥ 0 m")
+    }
+
+    /// Steering by the estimate needs a step that writes it.
+    fn needs(&self) -> Vec<StepData> {
+        if self.use_estimate { vec![StepData::of::<PoseEstimate>()] } else { Vec::new() }
     }
 }
 

@@ -2,7 +2,7 @@
 //! without the robot ever leaving its spot (paper, §V baselines).
 
 use crate::agent::Action;
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
 

@@ -9,7 +9,7 @@
 //! heading, so a belief that turns with the robot looks the same to the agent.
 
 use crate::belief::modes::belief_modes;
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use crate::particles::{ParticleSet, PoseEstimate};
 use crate::world::map::NetworkMap;
 use crate::world::{OnMap, Pose2};

@@ -1,4 +1,5 @@
-//! The `apfn` command line: one file per subcommand; `main.rs` only parses and dispatches.
+//! The `apfn` command line: one file per subcommand (and `task_arg`, how `--task` parses);
+//! `main.rs` only parses and dispatches.
 
 pub mod collect;
 pub mod eval;
@@ -10,6 +11,7 @@ pub mod run;
 pub mod sac;
 pub mod sweep;
 pub mod systems;
+mod task_arg;
 pub mod train_pfnet;
 pub mod train_sac;
 

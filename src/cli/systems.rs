@@ -2,6 +2,7 @@
 //! parameters with their defaults (as RON, ready to paste into a schedule file).
 
 use crate::compose::standard_registry;
+use crate::params::StepData;
 
 #[derive(clap::Subcommand, Clone, Debug, PartialEq, Eq)]
 pub enum SystemsCommand {
@@ -23,10 +24,10 @@ pub fn listing() -> String {
     for entry in registry.entries() {
         out += &format!("{} [{:?}]\n  {}\n", entry.name, entry.stage, entry.summary);
         if !entry.needs.is_empty() {
-            out += &format!("  needs: {}\n", entry.needs.join(", "));
+            out += &format!("  needs: {}\n", names(&entry.needs));
         }
         if !entry.produces.is_empty() {
-            out += &format!("  produces: {}\n", entry.produces.join(", "));
+            out += &format!("  produces: {}\n", names(&entry.produces));
         }
         let configured = entry.with_defaults();
         out += &format!("  params: {}\n", configured.params_ron().replace('\n', "\n  "));
@@ -39,6 +40,11 @@ pub fn listing() -> String {
         out.push('\n');
     }
     out
+}
+
+/// "ParticleSet, LidarScan".
+fn names(data: &[StepData]) -> String {
+    data.iter().map(|d| d.name).collect::<Vec<_>>().join(", ")
 }
 
 #[cfg(test)]

@@ -1,33 +1,41 @@
 //! The standard registry: every system apfn ships, in dataflow order. A new system (a learned
 //! likelihood, a belief projection, an agent) joins by adding one `register` call here.
 
-use crate::act::{drive, physics};
+use crate::act::{Collided, DriveCommand, drive, physics};
 use crate::agent::sac::{
-    RewardParams, SacPolicyParams, SacUpdateParams, localization_reward, sac_policy, sac_update,
+    Reward, RewardParams, SacPolicyParams, SacUpdateParams, localization_reward, sac_policy, sac_update,
 };
 use crate::agent::{
-    AvoidParams, GoalnavParams, InfogainParams, TurnParams, avoid_policy, goalnav_policy, infogain_policy,
-    random_policy, turn_policy,
+    Action, AvoidParams, GoalnavParams, InfogainParams, TurnParams, avoid_policy, goalnav_policy,
+    infogain_policy, random_policy, turn_policy,
 };
-use crate::belief::{BeliefParams, belief_crop};
-use crate::compose::registry::{NoParams, Registry, SystemSpec};
-use crate::episode::{KidnapParams, episode_reset, kidnap, step_metrics};
+use crate::belief::{BeliefCrop, BeliefParams, belief_crop};
+use crate::compose::registry::{Registry, SystemSpec};
+use crate::episode::{Episode, EpisodeStart, KidnapParams, StepError, episode_reset, kidnap, step_metrics};
+use crate::params::{NoParams, StepData};
 use crate::particles::{
-    BeamModelParams, InitParams, LikelihoodFieldParams, PfNetLikelihoodParams, RecoveryParams,
-    ResampleParams, TransitionParams, augmented_recovery, estimate, init_particles, mcl_beam_model,
-    mcl_likelihood_field, pfnet_likelihood, resample, transition,
+    BeamModelParams, InitParams, LikelihoodFieldParams, LikelihoodStats, ParticleSet, PfNetLikelihoodParams,
+    PoseEstimate, RecoveryParams, ResampleParams, TransitionParams, augmented_recovery, estimate,
+    init_particles, mcl_beam_model, mcl_likelihood_field, pfnet_likelihood, resample, transition,
 };
-use crate::plugin::ApfnSet::{self, *};
 use crate::sense::{
-    DepthParams, LidarParams, LocalGridParams, OdometryParams, depth, lidar, local_grid, odometry,
+    DepthParams, DepthStrip, LidarParams, LidarScan, LocalGrid, LocalGridParams, Odometry, OdometryParams,
+    depth, lidar, local_grid, odometry,
 };
+use crate::stage::ApfnSet::{self, *};
+use crate::world::TruePose;
+
+/// `data![A, B]`: the components A and B, as a step's needs or products.
+macro_rules! data {
+    ($($component:ty),*) => { vec![$(StepData::of::<$component>()),*] };
+}
 
 fn spec(
     name: &'static str,
     stage: ApfnSet,
     summary: &'static str,
-    needs: &'static [&'static str],
-    produces: &'static [&'static str],
+    needs: Vec<StepData>,
+    produces: Vec<StepData>,
 ) -> SystemSpec {
     SystemSpec { name, stage, summary, needs, produces }
 }
@@ -40,8 +48,8 @@ pub fn standard_registry() -> Registry {
             "episode_reset",
             Episode,
             "Reads EpisodeParams, maps, other robots' poses. Writes Episode, TruePose, physics, EpisodeStart; empties ParticleSet.",
-            &[],
-            &["EpisodeStart"],
+            data![],
+            data![Episode, EpisodeStart],
         ),
         episode_reset,
     )
@@ -50,8 +58,8 @@ pub fn standard_registry() -> Registry {
             "kidnap",
             Episode,
             "Reads Episode, the map's layers. Writes TruePose, PreviousPose (carried along), physics.",
-            &[],
-            &[],
+            data![],
+            data![],
         ),
         kidnap,
     )
@@ -60,13 +68,13 @@ pub fn standard_registry() -> Registry {
             "odometry",
             Sense,
             "Reads TruePose, PreviousPose. Writes Odometry (noisy), PreviousPose.",
-            &[],
-            &["Odometry"],
+            data![],
+            data![Odometry],
         ),
         odometry,
     )
     .register::<LidarParams, _, _>(
-        spec("lidar", Sense, "Reads TruePose, the map's RayGrid. Writes LidarScan.", &[], &["LidarScan"]),
+        spec("lidar", Sense, "Reads TruePose, the map's RayGrid. Writes LidarScan.", data![], data![LidarScan]),
         lidar,
     )
     .register::<LocalGridParams, _, _>(
@@ -74,13 +82,13 @@ pub fn standard_registry() -> Registry {
             "local_grid",
             Sense,
             "Reads LidarScan. Writes LocalGrid (0 occupied, 0.5 unknown, 1 free).",
-            &["LidarScan"],
-            &["LocalGrid"],
+            data![LidarScan],
+            data![LocalGrid],
         ),
         local_grid,
     )
     .register::<DepthParams, _, _>(
-        spec("depth", Sense, "Reads TruePose, the map's RayGrid. Writes DepthStrip.", &[], &["DepthStrip"]),
+        spec("depth", Sense, "Reads TruePose, the map's RayGrid. Writes DepthStrip.", data![], data![DepthStrip]),
         depth,
     )
     .register::<InitParams, _, _>(
@@ -88,8 +96,8 @@ pub fn standard_registry() -> Registry {
             "init_particles",
             Particles,
             "Reads TruePose, the map's layers. Writes ParticleSet (fills empty sets).",
-            &[],
-            &["ParticleSet"],
+            data![],
+            data![ParticleSet],
         ),
         init_particles,
     )
@@ -98,8 +106,8 @@ pub fn standard_registry() -> Registry {
             "transition",
             Particles,
             "Reads Odometry. Writes ParticleSet poses.",
-            &["ParticleSet", "Odometry"],
-            &[],
+            data![ParticleSet, Odometry],
+            data![],
         ),
         transition,
     )
@@ -108,8 +116,8 @@ pub fn standard_registry() -> Registry {
             "mcl_likelihood_field",
             Particles,
             "Reads LidarScan, the map's DistanceField. Writes ParticleSet weights, LikelihoodStats.",
-            &["ParticleSet", "LidarScan"],
-            &["LikelihoodStats"],
+            data![ParticleSet, LidarScan],
+            data![LikelihoodStats],
         ),
         mcl_likelihood_field,
     )
@@ -118,8 +126,8 @@ pub fn standard_registry() -> Registry {
             "mcl_beam_model",
             Particles,
             "Reads LidarScan, the map's RayGrid. Writes ParticleSet weights, LikelihoodStats.",
-            &["ParticleSet", "LidarScan"],
-            &["LikelihoodStats"],
+            data![ParticleSet, LidarScan],
+            data![LikelihoodStats],
         ),
         mcl_beam_model,
     )
@@ -128,8 +136,8 @@ pub fn standard_registry() -> Registry {
             "pfnet_likelihood",
             Particles,
             "Reads LocalGrid, the map's NetworkMap. Writes ParticleSet weights, LikelihoodStats.",
-            &["ParticleSet", "LocalGrid"],
-            &["LikelihoodStats"],
+            data![ParticleSet, LocalGrid],
+            data![LikelihoodStats],
         ),
         pfnet_likelihood,
     )
@@ -138,13 +146,13 @@ pub fn standard_registry() -> Registry {
             "augmented_recovery",
             Particles,
             "Reads LikelihoodStats, LidarScan, the map's layers. Writes ParticleSet (uniform injections).",
-            &["ParticleSet", "LidarScan", "LikelihoodStats"],
-            &[],
+            data![ParticleSet, LidarScan, LikelihoodStats],
+            data![],
         ),
         augmented_recovery,
     )
     .register::<ResampleParams, _, _>(
-        spec("resample", Particles, "Reads ParticleSet weights. Writes ParticleSet.", &["ParticleSet"], &[]),
+        spec("resample", Particles, "Reads ParticleSet weights. Writes ParticleSet.", data![ParticleSet], data![]),
         resample,
     )
     .register::<NoParams, _, _>(
@@ -152,8 +160,8 @@ pub fn standard_registry() -> Registry {
             "estimate",
             Particles,
             "Reads ParticleSet. Writes PoseEstimate.",
-            &["ParticleSet"],
-            &["PoseEstimate"],
+            data![ParticleSet],
+            data![PoseEstimate],
         ),
         estimate,
     )
@@ -162,8 +170,8 @@ pub fn standard_registry() -> Registry {
             "belief_crop",
             Belief,
             "Reads ParticleSet, PoseEstimate, the map's NetworkMap. Writes BeliefCrop.",
-            &["ParticleSet", "PoseEstimate"],
-            &["BeliefCrop"],
+            data![ParticleSet, PoseEstimate],
+            data![BeliefCrop],
         ),
         belief_crop,
     )
@@ -172,8 +180,8 @@ pub fn standard_registry() -> Registry {
             "step_metrics",
             Evaluate,
             "Reads TruePose, PoseEstimate, Episode. Writes StepError, EpisodeLog, CompletedEpisodes.",
-            &["EpisodeStart", "PoseEstimate"],
-            &["StepError"],
+            data![Episode, PoseEstimate],
+            data![StepError],
         ),
         step_metrics,
     )
@@ -182,29 +190,29 @@ pub fn standard_registry() -> Registry {
             "localization_reward",
             Evaluate,
             "Reads PoseEstimate, TruePose, Collided, EpisodeStart. Writes Reward (of the last action).",
-            &["EpisodeStart", "PoseEstimate"],
-            &["Reward"],
+            data![EpisodeStart, PoseEstimate],
+            data![Reward],
         ),
         localization_reward,
     )
     .register::<NoParams, _, _>(
-        spec("random_policy", Agent, "Reads ScenarioRng. Writes Action.", &[], &["Action"]),
+        spec("random_policy", Agent, "Reads ScenarioRng. Writes Action.", data![], data![Action]),
         random_policy,
     )
     .register::<TurnParams, _, _>(
-        spec("turn_policy", Agent, "Reads TurnParams. Writes Action.", &[], &["Action"]),
+        spec("turn_policy", Agent, "Reads TurnParams. Writes Action.", data![], data![Action]),
         turn_policy,
     )
     .register::<AvoidParams, _, _>(
-        spec("avoid_policy", Agent, "Reads DepthStrip, AvoidParams, RobotParams. Writes Action.", &["DepthStrip"], &["Action"]),
+        spec("avoid_policy", Agent, "Reads DepthStrip, AvoidParams, RobotParams. Writes Action.", data![DepthStrip], data![Action]),
         avoid_policy,
     )
     .register::<GoalnavParams, _, _>(
-        spec("goalnav_policy", Agent, "Reads TruePose (or PoseEstimate), EpisodeStart, the map's TraversableMap, ScenarioRng. Writes GoalPlan, Action.", &[], &["Action"]),
+        spec("goalnav_policy", Agent, "Reads TruePose (or PoseEstimate), EpisodeStart, the map's TraversableMap, ScenarioRng. Writes GoalPlan, Action.", data![], data![Action]),
         goalnav_policy,
     )
     .register::<InfogainParams, _, _>(
-        spec("infogain_policy", Agent, "Reads ParticleSet, the map's RayGrid, DistanceField and TraversableMap, the filter's LidarParams, LikelihoodFieldParams and TransitionParams, ScenarioRng. Writes Action.", &["ParticleSet"], &["Action"]),
+        spec("infogain_policy", Agent, "Reads ParticleSet, the map's RayGrid, DistanceField and TraversableMap, the filter's LidarParams, LikelihoodFieldParams and TransitionParams, ScenarioRng. Writes Action.", data![ParticleSet], data![Action]),
         infogain_policy,
     )
     .register::<SacPolicyParams, _, _>(
@@ -212,17 +220,17 @@ pub fn standard_registry() -> Registry {
             "sac_policy",
             Agent,
             "Reads BeliefCrop, LocalGrid, Collided, Episode, Reward, the learning agent if any. Writes Action, the agent's replay buffer.",
-            &["BeliefCrop", "LocalGrid", "Reward"],
-            &["Action"],
+            data![BeliefCrop, LocalGrid, Reward],
+            data![Action],
         ),
         sac_policy,
     )
     .register::<SacUpdateParams, _, _>(
-        spec("sac_update", Agent, "Reads the learning agent's replay buffer. Writes its networks.", &[], &[]),
+        spec("sac_update", Agent, "Reads the learning agent's replay buffer. Writes its networks.", data![], data![]),
         sac_update,
     )
     .register::<NoParams, _, _>(
-        spec("drive", Act, "Reads Action, RobotParams. Writes DriveCommand.", &["Action"], &["DriveCommand"]),
+        spec("drive", Act, "Reads Action, RobotParams. Writes DriveCommand.", data![Action], data![DriveCommand]),
         drive,
     )
     .register::<NoParams, _, _>(
@@ -230,10 +238,39 @@ pub fn standard_registry() -> Registry {
             "physics",
             Act,
             "Reads DriveCommand, the scene's PhysicsParams. Writes TruePose, Collided, MapPhysics.",
-            &["DriveCommand"],
-            &["TruePose", "Collided"],
+            data![DriveCommand],
+            data![TruePose, Collided],
         ),
         physics,
     );
     r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::StepParams;
+
+    #[test]
+    fn standard_registry_declarations_match_what_each_system_touches() {
+        for entry in standard_registry().entries() {
+            entry.check_declarations(&[]).unwrap_or_else(|e| panic!("{e}"));
+        }
+        let goalnav = GoalnavParams { use_estimate: true, ..GoalnavParams::default() };
+        let entry = standard_registry().get("goalnav_policy").map(|e| e.check_declarations(&goalnav.needs()));
+        assert_eq!(entry, Some(Ok(())), "goalnav reads the estimate it asks for");
+    }
+
+    #[test]
+    fn check_declarations_catches_a_false_claim() {
+        let mut registry = Registry::default();
+        let claim = spec("claims", Particles, "", data![PoseEstimate], data![ParticleSet]);
+        registry.register::<NoParams, _, _>(claim, |_: bevy::prelude::Query<&ParticleSet>| {});
+        let err = registry.entries()[0].check_declarations(&[]).expect_err("false claims");
+        assert!(
+            err.contains("needs PoseEstimate but never reads it")
+                && err.contains("produces ParticleSet but never writes it"),
+            "{err}"
+        );
+    }
 }

@@ -12,10 +12,7 @@ mod spawn;
 pub use catalog::standard_registry;
 pub use error::{ComposeError, read_ron, read_text};
 pub use paths::{relative_to_file, tidy};
-pub use registry::{
-    ConfiguredSystem, NoParams, RegisteredSystem, Registry, StepParams, StepSlot, SystemSpec, expect_param,
-    pretty_ron,
-};
+pub use registry::{ConfiguredSystem, RegisteredSystem, Registry, StepSlot, SystemSpec};
 pub use scene::{LoadedScene, MapSource, NamedMap, Scene, some_path};
 pub use schedule::{Pipeline, PipelineStep};
 pub use spawn::{MapName, NETWORK_RESOLUTION_M, spawn_scene};

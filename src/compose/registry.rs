@@ -1,12 +1,11 @@
 //! The system registry: every system apfn can schedule, under a stable name, with its stage,
 //! typed parameters (defaults = the paper's values) and the components it needs and produces.
 
-use crate::plugin::ApfnSet;
-use bevy::ecs::schedule::{IntoScheduleConfigs, ScheduleLabel, SystemSet};
-use bevy::ecs::system::ScheduleSystem;
+use crate::params::{StepData, StepParams, pretty_ron};
+use crate::stage::ApfnSet;
+use bevy::ecs::query::Access;
+use bevy::ecs::schedule::{ScheduleLabel, SystemSet};
 use bevy::prelude::*;
-use serde::Serialize;
-use serde::de::DeserializeOwned;
 use std::marker::PhantomData;
 
 /// A system with its parameters decoded, ready to be added to an `App`.
@@ -17,6 +16,8 @@ pub trait ConfiguredSystem: Send + Sync {
     fn params_ron(&self) -> String;
     /// [`StepParams::optional_defaults`] of the parameter type, for listings.
     fn optional_ron(&self) -> Vec<(&'static str, String)>;
+    /// [`StepParams::needs`]: what the parameter values add to the system's registered needs.
+    fn param_needs(&self) -> Vec<StepData>;
     /// A copy, so one validated pipeline can configure many worlds.
     fn boxed_clone(&self) -> Box<dyn ConfiguredSystem>;
 }
@@ -24,41 +25,6 @@ pub trait ConfiguredSystem: Send + Sync {
 /// The position of a step in its schedule file; slots run in file order.
 #[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct StepSlot(pub usize);
-
-/// The parameters of a schedulable system: a resource decoded from the schedule file, then
-/// checked for what its type cannot say (ranges, orderings), so that a bad value fails when the
-/// schedule loads, naming the file and step, instead of mid-run.
-pub trait StepParams: Resource + Serialize + DeserializeOwned + Default + Clone {
-    /// `Err("field: expected …")` when a value is out of range.
-    fn check(&self) -> Result<(), String> {
-        Ok(())
-    }
-
-    /// Optional groups of parameters that are off by default (`None`), each with the fields and
-    /// defaults it takes when switched on (`Some(())`), as pretty RON: what a listing shows
-    /// beyond `field: None`.
-    fn optional_defaults() -> Vec<(&'static str, String)> {
-        Vec::new()
-    }
-}
-
-/// `value` as the pretty RON listings print, with struct names.
-pub fn pretty_ron(value: &impl Serialize) -> String {
-    ron::ser::to_string_pretty(value, ron::ser::PrettyConfig::default().struct_names(true))
-        .unwrap_or_else(|e| format!("<unprintable: {e}>"))
-}
-
-/// `Err("{field}: expected {expected}")` unless `ok`; the building block of [`StepParams::check`].
-pub fn expect_param(ok: bool, field: &str, expected: &str) -> Result<(), String> {
-    if ok { Ok(()) } else { Err(format!("{field}: expected {expected}")) }
-}
-
-/// Parameters of systems that take none (`("lidar", ())` in a schedule file).
-#[derive(Resource, serde::Deserialize, Serialize, Clone, Debug, Default, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct NoParams {}
-
-impl StepParams for NoParams {}
 
 type Parser = Box<
     dyn Fn(&mut dyn erased_serde::Deserializer<'_>) -> Result<Box<dyn ConfiguredSystem>, erased_serde::Error>
@@ -72,12 +38,20 @@ pub struct RegisteredSystem {
     pub stage: ApfnSet,
     /// "Reads … Writes …", as the system's first doc line.
     pub summary: &'static str,
-    /// Components or resources some earlier step of the schedule must produce.
-    pub needs: &'static [&'static str],
-    /// Components or resources this system writes for later steps.
-    pub produces: &'static [&'static str],
+    /// Components some earlier step of the schedule must produce, whatever the parameters.
+    pub needs: Vec<StepData>,
+    /// Components this system writes for later steps.
+    pub produces: Vec<StepData>,
     parse: Parser,
     defaults: Box<dyn Fn() -> Box<dyn ConfiguredSystem> + Send + Sync>,
+    access: Box<dyn Fn(&mut World) -> SystemAccess + Send + Sync>,
+}
+
+/// What a system touches, as bevy's scheduler sees it.
+struct SystemAccess {
+    access: Access,
+    /// The system queues commands, so it may insert components it never borrows.
+    deferred: bool,
 }
 
 impl RegisteredSystem {
@@ -93,6 +67,27 @@ impl RegisteredSystem {
     pub fn with_defaults(&self) -> Box<dyn ConfiguredSystem> {
         (self.defaults)()
     }
+
+    /// Checks the declared needs (with `param_needs`) and products against the system's real ECS
+    /// access: each need must be read (or filtered on), each product written (or, for a system
+    /// that queues commands, possibly inserted). `Err` lists every claim the system does not back.
+    pub fn check_declarations(&self, param_needs: &[StepData]) -> Result<(), String> {
+        let mut world = World::new();
+        let SystemAccess { access, deferred } = (self.access)(&mut world);
+        let mut wrong = Vec::new();
+        for need in self.needs.iter().chain(param_needs) {
+            let id = need.component_id(&mut world);
+            if !access.has_read(id) && !access.has_archetypal(id) {
+                wrong.push(format!("needs {} but never reads it", need.name));
+            }
+        }
+        for product in &self.produces {
+            if !access.has_write(product.component_id(&mut world)) && !deferred {
+                wrong.push(format!("produces {} but never writes it", product.name));
+            }
+        }
+        if wrong.is_empty() { Ok(()) } else { Err(format!("`{}` {}", self.name, wrong.join("; "))) }
+    }
 }
 
 struct WithParams<P, S, M> {
@@ -105,7 +100,7 @@ struct WithParams<P, S, M> {
 impl<P, S, M> ConfiguredSystem for WithParams<P, S, M>
 where
     P: StepParams,
-    S: IntoScheduleConfigs<ScheduleSystem, M> + Copy + Send + Sync + 'static,
+    S: IntoSystem<(), (), M> + Copy + Send + Sync + 'static,
     M: 'static,
 {
     fn install(&self, app: &mut App, slot: StepSlot, stage: ApfnSet) {
@@ -119,6 +114,10 @@ where
 
     fn optional_ron(&self) -> Vec<(&'static str, String)> {
         P::optional_defaults()
+    }
+
+    fn param_needs(&self) -> Vec<StepData> {
+        self.params.needs()
     }
 
     fn boxed_clone(&self) -> Box<dyn ConfiguredSystem> {
@@ -137,8 +136,8 @@ pub struct SystemSpec {
     pub name: &'static str,
     pub stage: ApfnSet,
     pub summary: &'static str,
-    pub needs: &'static [&'static str],
-    pub produces: &'static [&'static str],
+    pub needs: Vec<StepData>,
+    pub produces: Vec<StepData>,
 }
 
 impl Registry {
@@ -146,7 +145,7 @@ impl Registry {
     pub fn register<P, S, M>(&mut self, spec: SystemSpec, system: S) -> &mut Self
     where
         P: StepParams,
-        S: IntoScheduleConfigs<ScheduleSystem, M> + Copy + Send + Sync + 'static,
+        S: IntoSystem<(), (), M> + Copy + Send + Sync + 'static,
         M: 'static,
     {
         assert!(self.get(spec.name).is_none(), "system `{}` registered twice", spec.name);
@@ -158,6 +157,11 @@ impl Registry {
         let defaults = Box::new(move || {
             Box::new(WithParams { params: P::default(), system, marker: PhantomData }) as Box<_>
         });
+        let access = Box::new(move |world: &mut World| {
+            let mut system = IntoSystem::into_system(system);
+            let access = system.initialize(world).combined_access().clone();
+            SystemAccess { access, deferred: system.has_deferred() }
+        });
         self.entries.push(RegisteredSystem {
             name: spec.name,
             stage: spec.stage,
@@ -166,6 +170,7 @@ impl Registry {
             produces: spec.produces,
             parse,
             defaults,
+            access,
         });
         self
     }
@@ -222,11 +227,13 @@ fn edit_distance(a: &str, b: &str) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::params::NoParams;
 
     #[test]
     fn nearest_suggests_a_close_name_only() {
         let mut registry = Registry::default();
-        let spec = |name| SystemSpec { name, stage: ApfnSet::Sense, summary: "", needs: &[], produces: &[] };
+        let spec =
+            |name| SystemSpec { name, stage: ApfnSet::Sense, summary: "", needs: vec![], produces: vec![] };
         registry.register::<NoParams, _, _>(spec("lidar"), || {});
         registry.register::<NoParams, _, _>(spec("odometry"), || {});
         assert_eq!(registry.nearest("lidr"), Some("lidar"));

@@ -7,7 +7,8 @@
 
 use crate::compose::error::{ComposeError, read_text};
 use crate::compose::registry::{ConfiguredSystem, Registry, StepSlot, chain_slots};
-use crate::plugin::ApfnSet;
+use crate::params::StepData;
+use crate::stage::ApfnSet;
 use bevy::prelude::*;
 use serde::de::{self, DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
 use std::fmt;
@@ -60,7 +61,7 @@ impl Pipeline {
             name: name.to_owned(),
             message,
         };
-        let mut produced: Vec<&str> = Vec::new();
+        let mut produced: Vec<StepData> = Vec::new();
         for (index, step) in self.steps.iter().enumerate() {
             if self.steps[..index].iter().any(|s| s.name == step.name) {
                 return Err(error(index, step.name, "appears twice; a system runs once per step".into()));
@@ -79,7 +80,9 @@ impl Pipeline {
                 ));
             }
             let entry = registry.get(step.name).expect("parsed steps are registered");
-            for need in entry.needs {
+            let always = entry.needs.iter().map(|need| (need, ""));
+            let param_needs = step.system.param_needs();
+            for (need, why) in always.chain(param_needs.iter().map(|need| (need, " with these parameters"))) {
                 if !produced.contains(need) {
                     let providers: Vec<_> = registry
                         .entries()
@@ -91,12 +94,13 @@ impl Pipeline {
                         index,
                         step.name,
                         format!(
-                            "needs {need}, which no earlier step produces; add one of {providers:?} before it"
+                            "needs {}{why}, which no earlier step produces; add one of {providers:?} before it",
+                            need.name
                         ),
                     ));
                 }
             }
-            produced.extend(entry.produces);
+            produced.extend(&entry.produces);
         }
         Ok(())
     }
@@ -342,6 +346,42 @@ mod tests {
             m.contains("needs LidarScan") && m.contains("lidar"),
             "a likelihood needs a sensor first: {m}"
         );
+    }
+
+    #[test]
+    fn schedule_rejects_goalnav_steering_by_an_estimate_no_step_makes() {
+        let steps = |goalnav: &str, filter: &str| {
+            format!(
+                r#"Schedule(steps: [("lidar", ()), ("init_particles", ()), {filter}("goalnav_policy", {goalnav})])"#
+            )
+        };
+        let m = message(&steps("(use_estimate: true)", ""));
+        assert!(
+            m.starts_with("test.ron: step 3 `goalnav_policy`: needs PoseEstimate with these parameters")
+                && m.contains("[\"estimate\"]"),
+            "names the file, the step, the missing data and its maker: {m}"
+        );
+        parse(&steps("()", "")).expect("steering by the true pose needs no estimate");
+        parse(&steps("(use_estimate: true)", r#"("estimate", ()), "#)).expect("an estimate step comes first");
+        let registry = standard_registry();
+        let mut p = parse(&steps("()", "")).expect("valid");
+        let e = p.set_params("goalnav_policy", "(use_estimate: true)", &registry).expect_err("no estimate");
+        assert!(e.contains("needs PoseEstimate"), "overrides are validated too: {e}");
+    }
+
+    #[test]
+    fn every_shipped_schedule_validates() {
+        let registry = standard_registry();
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("systems");
+        let mut count = 0;
+        for file in std::fs::read_dir(&dir).expect("systems/ exists") {
+            let path = file.expect("a directory entry").path();
+            if path.extension().is_some_and(|x| x == "ron") {
+                Pipeline::load(&path, &registry).unwrap_or_else(|e| panic!("{e}"));
+                count += 1;
+            }
+        }
+        assert!(count >= 10, "systems/ ships the pipelines ({count} found)");
     }
 
     #[test]

@@ -3,8 +3,8 @@
 //! carrying. Odometry keeps reporting the motion the wheels made; only the scans betray the move.
 
 use crate::act::{MapPhysics, PhysicsBody};
-use crate::compose::{StepParams, expect_param};
 use crate::episode::reset::Episode;
+use crate::params::{StepParams, expect_param};
 use crate::world::map::TraversableMap;
 use crate::world::{OccupancyMap, OnMap, Pose2, PreviousPose, ScenarioRng, TruePose};
 use bevy::prelude::*;

@@ -5,7 +5,7 @@
 
 use crate::episode::{EpisodeLog, EpisodeRecord, SUCCESS_RADIUS_M, succeeded};
 use crate::eval::cell::ResultRow;
-use crate::eval::pixel_text::PixelText;
+use crate::eval::font::register_sans_serif;
 use crate::world::map::render;
 use crate::world::{OccupancyMap, Pose2};
 use image::{ImageFormat, Rgb, RgbImage, imageops};
@@ -23,7 +23,7 @@ const MARGIN_M: f32 = 2.0;
 const TRUTH: RGBColor = RGBColor(0, 150, 60);
 const ESTIMATE: RGBColor = RGBColor(235, 95, 0);
 const PARTICLE: RGBColor = RGBColor(40, 70, 220);
-/// Pixel-font sizes: 27 draws glyph pixels 2 × 2, 40 draws them 3 × 3 (see `pixel_text`).
+/// Labels, legends and axes; the title is larger.
 const TEXT: (&str, u32) = ("sans-serif", 27);
 
 #[derive(Debug, thiserror::Error)]
@@ -138,7 +138,8 @@ pub fn episode_figure(
     let scaled = imageops::resize(&crop.to_image(), w, h, imageops::FilterType::Nearest);
     imageops::replace(&mut canvas, &scaled, view.left as i64, view.top as i64);
     {
-        let root = PixelText(BitMapBackend::with_buffer(&mut canvas, SIZE)).into_drawing_area();
+        register_sans_serif();
+        let root = BitMapBackend::with_buffer(&mut canvas, SIZE).into_drawing_area();
         draw_map_overlay(&root, map, &view, log)?;
         let centred = Pos::new(HPos::Center, VPos::Center);
         let font = ("sans-serif", 40).into_font().color(&BLACK).pos(centred);
@@ -242,14 +243,17 @@ fn boxed_text<DB: DrawingBackend>(
     lines: &[String],
 ) -> Result<(), FigureError> {
     let (x, y) = at;
-    // The pixel font at size 27 advances 12 px per character (see `pixel_text`).
-    let width = 16 + 12 * lines.iter().map(|l| l.chars().count()).max().unwrap_or(0) as i32;
-    let bottom = y + 8 + 28 * lines.len() as i32;
+    let style = TEXT.into_font().color(&BLACK).pos(Pos::new(HPos::Left, VPos::Center));
+    let mut widest = 0;
+    for line in lines {
+        widest = widest.max(root.estimate_text_size(line, &style).map_err(draw_err)?.0 as i32);
+    }
+    let (width, bottom) = (16 + widest, y + 8 + 28 * lines.len() as i32);
     root.draw(&Rectangle::new([(x, y), (x + width, bottom)], WHITE.mix(0.85).filled())).map_err(draw_err)?;
     root.draw(&Rectangle::new([(x, y), (x + width, bottom)], BLACK.stroke_width(1))).map_err(draw_err)?;
     for (k, line) in lines.iter().enumerate() {
-        let style = TEXT.into_font().color(&BLACK).pos(Pos::new(HPos::Left, VPos::Center));
-        root.draw(&Text::new(line.clone(), (x + 8, y + 18 + 28 * k as i32), style)).map_err(draw_err)?;
+        root.draw(&Text::new(line.clone(), (x + 8, y + 18 + 28 * k as i32), style.clone()))
+            .map_err(draw_err)?;
     }
     Ok(())
 }

@@ -6,12 +6,12 @@ mod cell;
 mod config;
 mod episodes;
 mod figure;
-mod pixel_text;
+mod font;
 mod table;
 
 pub use cell::{CellOutcome, CellSpec, ResultRow, cell_steps, cells, labels, run_cell, schedule_labels};
 pub use config::{EvalConfig, LoadedEval, MapGroup};
 pub use episodes::EpisodeRow;
 pub use figure::{FigureError, encode_png, episode_figure, figure_file_name, figure_title};
-pub use pixel_text::PixelText;
+pub use font::register_sans_serif;
 pub use table::{csv, markdown, write_results};

@@ -16,7 +16,7 @@
 //! readings below range_min count as range_max (nav2 `amcl_node` maps both to max range). The
 //! LiDAR sits at the robot centre, facing ahead.
 
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use crate::particles::likelihood_field::selected_beams;
 use crate::particles::set::{
     FilterHealth, Guard, LikelihoodStats, ObservationModel, ParticleError, ParticleSet, record_observation,

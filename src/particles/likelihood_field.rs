@@ -9,7 +9,7 @@
 //! hypotheses alive in self-similar places (long aisles); `combine: amcl_cube_sum` reproduces it.
 //! The LiDAR is taken to sit at the robot centre, facing ahead.
 
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use crate::particles::set::{
     FilterHealth, Guard, LikelihoodStats, ObservationModel, ParticleError, ParticleSet, record_observation,
 };

@@ -2,10 +2,10 @@
 //! network's log-likelihoods to the particles' log-weights, with one batched forward pass over
 //! every particle of every robot in the world.
 
-use crate::compose::{StepParams, expect_param};
 use crate::nn::pfnet::{
     FeatureBank, FeatureCacheSpec, LocalMapSpec, MapView, PfNet, PfNetConfig, Workspaces, crop_local_maps,
 };
+use crate::params::{StepParams, expect_param};
 use crate::particles::set::{
     FilterHealth, LikelihoodStats, ObservationModel, ParticleSet, record_observation,
 };

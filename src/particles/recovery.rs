@@ -15,8 +15,8 @@
 //! - They start at the first update of each episode (nav2 does the same when they are 0) and are
 //!   not reset after an injection (nav2 resets them, which caps injections at one step in two).
 
-use crate::compose::{StepParams, expect_param};
 use crate::episode::EpisodeStart;
+use crate::params::{StepParams, expect_param};
 use crate::particles::beam_model::{BeamModelParams, add_log_beam_likelihoods};
 use crate::particles::likelihood_field::{LikelihoodFieldParams, add_log_likelihoods};
 use crate::particles::set::{FilterHealth, LikelihoodStats, ObservationModel, ParticleError, ParticleSet};

@@ -3,7 +3,7 @@
 //! (in training) and diversity survive. α = 1 is classical hard resampling with uniform weights after.
 //! With `kld` set, the count adapts to the belief's spread (KLD-sampling, as nav2 AMCL does).
 
-use crate::compose::{StepParams, pretty_ron};
+use crate::params::{StepParams, pretty_ron};
 use crate::particles::kld::{KldHistogram, KldParams};
 use crate::particles::set::{ParticleError, ParticleSet};
 use crate::world::EpisodeRng;

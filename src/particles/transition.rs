@@ -1,7 +1,7 @@
 //! Transition (motion update): each particle applies the robot's odometry delta in its own frame,
 //! perturbed by Gaussian noise, as in PF-net's transition model.
 
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use crate::particles::set::ParticleSet;
 use crate::sense::Odometry;
 use crate::world::rng::stream;

@@ -1,7 +1,7 @@
 //! A one-row depth camera: the paper's 90° depth image reduced to the strip at the sensor's
 //! height, cast on the fine grid (the `avoid` baseline and the agent's optional depth input).
 
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use crate::sense::raycast::RayGrid;
 use crate::world::{OnMap, Pose2, TruePose};
 use bevy::prelude::*;

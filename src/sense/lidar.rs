@@ -1,6 +1,6 @@
 //! Planar LiDAR: 228 rays over 240°, 0.05–5.6 m (the paper's sensor), cast on the fine grid.
 
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use crate::sense::raycast::RayGrid;
 use crate::world::{EpisodeRng, OnMap, Pose2, RobotParams, TruePose};
 use bevy::prelude::*;

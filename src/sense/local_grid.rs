@@ -2,7 +2,7 @@
 //! egocentric occupancy image (0 = occupied, 0.5 = unknown, 1 = free), the input of PF-net's
 //! observation encoder and of the agent.
 
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use crate::sense::lidar::LidarScan;
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};

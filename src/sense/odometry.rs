@@ -1,6 +1,6 @@
 //! Odometry: the robot's motion since the previous agent step, in its previous frame, with noise.
 
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use crate::world::{EpisodeRng, Pose2, PreviousPose, TruePose, wrap_angle};
 use bevy::prelude::*;
 use rand::Rng;

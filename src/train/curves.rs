@@ -1,7 +1,7 @@
 //! The learning curves of a training run as a PNG: two series per logged step (PF-net: training
 //! and validation loss; SAC: the episodes' pose loss, at the end and summed).
 
-use crate::eval::{FigureError, PixelText, encode_png};
+use crate::eval::{FigureError, encode_png, register_sans_serif};
 use image::{Rgb, RgbImage};
 use plotters::prelude::*;
 
@@ -35,7 +35,8 @@ pub fn curves_png(
 ) -> Result<Vec<u8>, FigureError> {
     let mut canvas = RgbImage::from_pixel(SIZE.0, SIZE.1, Rgb([255, 255, 255]));
     {
-        let root = PixelText(BitMapBackend::with_buffer(&mut canvas, SIZE)).into_drawing_area();
+        register_sans_serif();
+        let root = BitMapBackend::with_buffer(&mut canvas, SIZE).into_drawing_area();
         let finite = points.iter().flat_map(|p| [p.1, p.2]).filter(|v| v.is_finite());
         let high = finite.fold(0.0f64, f64::max).max(1e-3) * 1.1;
         let last = points.last().map_or(1, |p| p.0).max(1) as f64;

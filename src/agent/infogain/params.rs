@@ -1,7 +1,7 @@
 //! The parameters of `infogain_policy`: candidate motions, how far ahead they are imagined, and
 //! how much of the belief, the sensor and the map the prediction uses.
 
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
 

@@ -3,8 +3,8 @@
 //! touched anything while executing the action.
 
 use crate::act::Collided;
-use crate::compose::{StepParams, expect_param};
 use crate::episode::EpisodeStart;
+use crate::params::{StepParams, expect_param};
 use crate::particles::PoseEstimate;
 use crate::world::{TruePose, angle_error};
 use bevy::prelude::*;

@@ -1,7 +1,7 @@
 //! `sac_update`: gradient steps interleaved with collection, at a configurable ratio.
 
 use crate::agent::sac::learner::SacAgent;
-use crate::compose::{StepParams, expect_param};
+use crate::params::{StepParams, expect_param};
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
 
