@@ -3,7 +3,7 @@
 
 use crate::act::collision::{Collided, is_touching};
 use crate::act::drive::DriveCommand;
-use crate::world::{Cell, OccupancyMap, OnMap, Pose2, TruePose};
+use crate::world::{Cell, OccupancyMap, OnMap, Pose2, RobotId, TruePose};
 use bevy::prelude::*;
 use bevy_rapier2d::rapier::prelude::*;
 use rayon::prelude::*;
@@ -184,23 +184,25 @@ pub fn wall_rectangles(map: &OccupancyMap) -> Vec<CellRect> {
     rects
 }
 
-/// Reads DriveCommand, PhysicsParams, OnMap. Writes MapPhysics, TruePose, Collided.
-/// Maps step in parallel; each map's robots step together in insertion order (deterministic).
+/// Reads DriveCommand, PhysicsParams, OnMap, RobotId. Writes MapPhysics, TruePose, Collided.
+/// Maps step in parallel; each map's robots step together in RobotId order (deterministic,
+/// whatever components a schedule adds).
 pub fn physics(
     params: Res<PhysicsParams>,
     mut maps: Query<(Entity, &mut MapPhysics)>,
-    mut robots: Query<(&OnMap, &PhysicsBody, &DriveCommand, &mut TruePose, &mut Collided)>,
+    mut robots: Query<(&RobotId, &OnMap, &PhysicsBody, &DriveCommand, &mut TruePose, &mut Collided)>,
 ) {
     let mut by_map: HashMap<Entity, Vec<_>> = HashMap::new();
-    for (on_map, body, command, pose, collided) in &mut robots {
-        by_map.entry(on_map.0).or_default().push(((*body, *command), pose, collided));
+    for (id, on_map, body, command, pose, collided) in &mut robots {
+        by_map.entry(on_map.0).or_default().push((*id, (*body, *command), pose, collided));
     }
+    by_map.values_mut().for_each(|robots| robots.sort_unstable_by_key(|(id, ..)| *id));
     let mut work: Vec<_> =
         maps.iter_mut().filter_map(|(entity, physics)| Some((physics, by_map.remove(&entity)?))).collect();
     work.par_iter_mut().for_each(|(physics, robots)| {
-        let commands: Vec<_> = robots.iter().map(|(command, _, _)| *command).collect();
+        let commands: Vec<_> = robots.iter().map(|(_, command, _, _)| *command).collect();
         let results = physics.step_robots(&commands, params.substeps);
-        for ((_, pose, collided), (new_pose, hit)) in robots.iter_mut().zip(results) {
+        for ((_, _, pose, collided), (new_pose, hit)) in robots.iter_mut().zip(results) {
             pose.0 = new_pose;
             collided.0 = hit;
         }
@@ -220,7 +222,9 @@ mod tests {
         let mut physics = MapPhysics::from_map(&map, 0.1);
         let body = physics.add_robot(pose, 0.18, false);
         let map_entity = world.spawn((map, physics)).id();
-        let robot = world.spawn((OnMap(map_entity), body, command, TruePose(pose), Collided::default())).id();
+        let robot = world
+            .spawn((RobotId(0), OnMap(map_entity), body, command, TruePose(pose), Collided::default()))
+            .id();
         (world, robot)
     }
 

@@ -260,7 +260,7 @@ fn snapshot(world: &mut World, robots: &[Entity], world_index: u64, step: u64) -
             let map = entity.get::<OnMap>().and_then(|m| world.get::<MapName>(m.0)).map(|n| n.0.clone());
             let episode = entity.get::<Episode>().copied().unwrap_or_default();
             let action = entity.get::<Action>().copied().unwrap_or_default();
-            // Every robot spawns with an empty set; `init_particles` fills it when a filter runs.
+            // Every robot spawns with an empty set marked `NeedsInit`; `init_particles` fills it when a filter runs.
             let filtering = entity.get::<ParticleSet>().is_some_and(|set| !set.is_empty());
             Some(TrajectoryRow {
                 world: world_index,

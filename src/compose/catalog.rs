@@ -95,7 +95,7 @@ pub fn standard_registry() -> Registry {
         spec(
             "init_particles",
             Particles,
-            "Reads TruePose, the map's layers. Writes ParticleSet (fills empty sets).",
+            "Reads NeedsInit, TruePose, the map's layers. Writes ParticleSet (draws marked sets).",
             data![],
             data![ParticleSet],
         ),

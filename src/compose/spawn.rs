@@ -8,11 +8,11 @@ use crate::belief::BeliefCrop;
 use crate::compose::error::ComposeError;
 use crate::compose::scene::{LoadedScene, NamedMap};
 use crate::episode::{Episode, EpisodeLog, StepError};
-use crate::particles::{FilterHealth, ParticleSet, PoseEstimate};
+use crate::particles::{FilterHealth, NeedsInit, ParticleSet, PoseEstimate};
 use crate::sense::{DepthStrip, LidarScan, LocalGrid, Odometry, RayGrid};
 use crate::world::map::{DistanceField, NetworkMap, START_POSE_TRIES, TraversableMap};
 use crate::world::rng::stream;
-use crate::world::{EpisodeRng, OnMap, Pose2, PreviousPose, Robot, ScenarioRng, TruePose};
+use crate::world::{OnMap, Pose2, PreviousPose, Robot, RobotId, RobotRngs, TruePose};
 use bevy::prelude::*;
 use rand::Rng;
 
@@ -24,7 +24,8 @@ pub struct MapName(pub String);
 pub const NETWORK_RESOLUTION_M: f32 = 0.1;
 
 /// Inserts the scene's world resources and spawns its maps and robots; returns the robots in
-/// spawn order. Each robot's random streams are keyed by (seed, map index, robot index).
+/// spawn order, which is their `RobotId` order. Each robot's random streams are keyed by (seed,
+/// map index, robot index).
 pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity>, ComposeError> {
     let scene = &loaded.scene;
     world.insert_resource(scene.robot.clone());
@@ -43,13 +44,13 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
         let mut new_robots = Vec::new();
         for robot_index in 0..scene.robots_per_map {
             let key = stream(&[scene.seed, map_index as u64, robot_index as u64]).random::<u64>();
-            let (mut rng, noise) = (ScenarioRng::seeded(key), EpisodeRng::seeded(key));
+            let mut rngs = RobotRngs::seeded(key);
             let min_gap = 2.0 * scene.robot.radius_m;
             let clear = |p: &Pose2| !scene.robots_collide || starts.iter().all(|s| s.distance(p) > min_gap);
-            let start = traversable.sample_pose_where(map, &mut rng.0, START_POSE_TRIES, clear);
+            let start = traversable.sample_pose_where(map, &mut rngs.scenario.0, START_POSE_TRIES, clear);
             starts.push(start);
             let body = physics.add_robot(start, scene.robot.radius_m, scene.robots_collide);
-            new_robots.push((start, body, rng, noise));
+            new_robots.push((start, body, rngs));
         }
         let map_entity = world
             .spawn((
@@ -62,14 +63,15 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
                 map.clone(),
             ))
             .id();
-        for (start, body, scenario, noise) in new_robots {
+        for (start, body, rngs) in new_robots {
+            let id = RobotId(robots.len() as u32);
             let robot = world
                 .spawn((
-                    (Robot, TruePose(start), PreviousPose(start), OnMap(map_entity), body, scenario, noise),
+                    (Robot, id, TruePose(start), PreviousPose(start), OnMap(map_entity), body, rngs),
                     (Action::default(), DriveCommand::default(), Collided::default(), Episode::default()),
                     (LidarScan::default(), LocalGrid::default(), DepthStrip::default(), Odometry::default()),
                     (
-                        ParticleSet::default(),
+                        (ParticleSet::default(), NeedsInit),
                         PoseEstimate::default(),
                         FilterHealth::default(),
                         BeliefCrop::default(),

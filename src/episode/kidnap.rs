@@ -96,7 +96,7 @@ mod tests {
     use crate::sense::{Odometry, OdometryParams, odometry};
     use crate::testing::tiny_room;
     use crate::world::map::procedural::{ApartmentParams, generate_apartment};
-    use crate::world::{EpisodeRng, angle_error};
+    use crate::world::{SensorRng, angle_error};
     use bevy::ecs::system::RunSystemOnce;
 
     /// A world with one robot at `start` on `map`, at episode step `step`, having moved from
@@ -117,7 +117,7 @@ mod tests {
                     PreviousPose(previous),
                     Odometry::default(),
                     ScenarioRng::seeded(5),
-                    EpisodeRng::seeded(5),
+                    SensorRng::seeded(5),
                 ),
             ))
             .id();

@@ -9,7 +9,7 @@
 use crate::act::Collided;
 use crate::episode::reset::{Episode, EpisodeParams};
 use crate::particles::{ParticleSet, PoseEstimate};
-use crate::world::{OnMap, Pose2, TruePose, angle_error, wrap_angle};
+use crate::world::{OnMap, Pose2, RobotId, TruePose, angle_error, wrap_angle};
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -68,17 +68,19 @@ pub struct EpisodeRecord {
     pub log: EpisodeLog,
 }
 
-/// Episodes finished so far in this world, in completion order.
+/// Episodes finished so far in this world, in completion order; episodes that finish at the
+/// same step are in `RobotId` order.
 #[derive(Resource, Clone, Debug, Default)]
 pub struct CompletedEpisodes(pub Vec<EpisodeRecord>);
 
-/// Reads TruePose, PoseEstimate, Episode, EpisodeParams, Collided, ParticleSet. Writes StepError,
-/// EpisodeLog, CompletedEpisodes (when an episode's last step is logged).
+/// Reads TruePose, PoseEstimate, Episode, EpisodeParams, Collided, ParticleSet, RobotId. Writes
+/// StepError, EpisodeLog, CompletedEpisodes (when an episode's last step is logged, in RobotId
+/// order).
 pub fn step_metrics(
     params: Res<EpisodeParams>,
     mut completed: ResMut<CompletedEpisodes>,
     mut robots: Query<(
-        Entity,
+        (Entity, &RobotId),
         &OnMap,
         (&TruePose, &PoseEstimate, &Episode),
         (Option<&Collided>, Option<&ParticleSet>),
@@ -86,7 +88,9 @@ pub fn step_metrics(
         &mut EpisodeLog,
     )>,
 ) {
-    for (robot, on_map, (truth, estimate, episode), (collided, particles), mut error, mut log) in &mut robots
+    let mut finished = Vec::new();
+    for ((robot, id), on_map, (truth, estimate, episode), (collided, particles), mut error, mut log) in
+        &mut robots
     {
         *error = StepError::between(&estimate.pose, &truth.0);
         if episode.step == 1 {
@@ -104,9 +108,11 @@ pub fn step_metrics(
         log.estimates.push(estimate.pose);
         if episode.step == params.steps {
             let log = std::mem::take(&mut *log);
-            completed.0.push(EpisodeRecord { robot, map: on_map.0, episode: episode.index, log });
+            finished.push((*id, EpisodeRecord { robot, map: on_map.0, episode: episode.index, log }));
         }
     }
+    finished.sort_unstable_by_key(|(id, _)| *id);
+    completed.0.extend(finished.into_iter().map(|(_, record)| record));
 }
 
 /// The summary of many episodes: one cell of a results table.
@@ -209,7 +215,7 @@ mod tests {
         let truth = Pose2::new(1.0, 1.0, 0.0);
         let robot = world
             .spawn((
-                OnMap(Entity::PLACEHOLDER),
+                (RobotId(0), OnMap(Entity::PLACEHOLDER)),
                 ParticleSet::from_poses(&[truth; 3]),
                 TruePose(truth),
                 PoseEstimate { pose: Pose2::new(1.3, 1.4, 0.0), ..default() },
@@ -229,5 +235,29 @@ mod tests {
         assert_eq!(done[0].log.truth, vec![truth; 2], "truth is logged per step for figures");
         assert_eq!(done[0].log.first_particles.len(), 3, "the first step's particles are kept");
         assert_eq!(done[0].log.first_particle_count, 3, "with their count");
+    }
+
+    #[test]
+    fn step_metrics_records_simultaneous_endings_in_robot_id_order() {
+        #[derive(Component)]
+        struct Extra;
+        let mut world = World::new();
+        world.insert_resource(EpisodeParams { steps: 1, ..default() });
+        world.init_resource::<CompletedEpisodes>();
+        // Spawned out of id order, and half of them in another archetype.
+        for id in [2u32, 0, 3, 1] {
+            let pose = Pose2::new(id as f32, 0.0, 0.0);
+            let mut robot = world.spawn((
+                (RobotId(id), OnMap(Entity::PLACEHOLDER), TruePose(pose)),
+                (PoseEstimate { pose, ..default() }, Episode { index: 0, step: 1 }),
+                (StepError::default(), EpisodeLog::default()),
+            ));
+            if id % 2 == 0 {
+                robot.insert(Extra);
+            }
+        }
+        world.run_system_once(step_metrics).unwrap();
+        let xs: Vec<f32> = world.resource::<CompletedEpisodes>().0.iter().map(|r| r.log.truth[0].x).collect();
+        assert_eq!(xs, [0.0, 1.0, 2.0, 3.0], "records follow RobotId, not spawn or archetype order");
     }
 }

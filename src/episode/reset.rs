@@ -2,9 +2,11 @@
 
 use crate::act::{Collided, MapPhysics, PhysicsBody};
 use crate::agent::Action;
-use crate::particles::ParticleSet;
+use crate::particles::{NeedsInit, ParticleSet};
 use crate::world::map::{START_POSE_TRIES, TraversableMap};
-use crate::world::{OccupancyMap, OnMap, Pose2, PreviousPose, RobotParams, ScenarioRng, TruePose};
+use crate::world::{
+    OccupancyMap, OnMap, Pose2, PreviousPose, RobotId, RobotParams, ScenarioRng, TruePose, in_id_order,
+};
 use bevy::prelude::*;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -45,16 +47,18 @@ pub struct EpisodeEnd;
 
 /// Reads EpisodeParams, RobotParams, the map's OccupancyMap and TraversableMap, the other robots'
 /// TruePose. Writes Episode, TruePose, PreviousPose, MapPhysics, ScenarioRng, EpisodeStart,
-/// EpisodeEnd, and empties the ParticleSet so that `init_particles` draws a fresh one for the new
-/// episode; clears Action and Collided, so nothing of the last episode leaks into the new one.
-/// Robots that collide with each other restart at least two radii apart, as they spawn.
+/// EpisodeEnd; empties the ParticleSet and marks it `NeedsInit`, so that `init_particles` draws a
+/// fresh one for the new episode; clears Action and Collided, so nothing of the last episode
+/// leaks into the new one. Robots that collide with each other restart at least two radii apart,
+/// as they spawn; robots are visited in `RobotId` order, so who restarts where never depends on
+/// which components a schedule adds.
 pub fn episode_reset(
     params: Res<EpisodeParams>,
     body_size: Res<RobotParams>,
     mut commands: Commands,
     mut maps: Query<(Entity, &OccupancyMap, &TraversableMap, &mut MapPhysics)>,
     mut robots: Query<(
-        Entity,
+        (Entity, &RobotId),
         &mut OnMap,
         &mut PhysicsBody,
         &mut Episode,
@@ -67,19 +71,22 @@ pub fn episode_reset(
     let map_entities: Vec<Entity> = maps.iter().map(|(entity, ..)| entity).collect();
     // Where every robot is (updated as robots restart), to keep colliding robots apart.
     let mut positions: Vec<(Entity, Entity, Pose2)> =
-        robots.iter().map(|(robot, on_map, _, _, (pose, _), ..)| (robot, on_map.0, pose.0)).collect();
+        robots.iter().map(|((robot, _), on_map, _, _, (pose, _), ..)| (robot, on_map.0, pose.0)).collect();
     let min_gap = 2.0 * body_size.radius_m;
-    for (
-        robot,
-        mut on_map,
-        mut body,
-        mut episode,
-        (mut pose, mut previous),
-        mut rng,
-        particles,
-        (action, collided),
-    ) in &mut robots
-    {
+    for robot in in_id_order(robots.iter().map(|((robot, id), ..)| (robot, id))) {
+        let Ok((
+            _,
+            mut on_map,
+            mut body,
+            mut episode,
+            (mut pose, mut previous),
+            mut rng,
+            particles,
+            (action, collided),
+        )) = robots.get_mut(robot)
+        else {
+            continue;
+        };
         commands.entity(robot).remove::<(EpisodeStart, EpisodeEnd)>();
         if episode.step >= params.steps {
             let next_map = match map_entities.len() {
@@ -120,6 +127,7 @@ pub fn episode_reset(
             *episode = Episode { index: episode.index + 1, step: 0 };
             if let Some(mut particles) = particles {
                 *particles = ParticleSet::default();
+                commands.entity(robot).insert(NeedsInit);
             }
             if let Some(mut action) = action {
                 *action = Action::default();
@@ -163,7 +171,7 @@ mod tests {
                 Episode::default(),
                 TruePose(start),
                 PreviousPose(start),
-                ScenarioRng::seeded(1),
+                (RobotId(0), ScenarioRng::seeded(1)),
                 ParticleSet::from_poses(&[start]),
                 (Action::new(0.5, 0.5), Collided(false)),
             ))
@@ -192,13 +200,18 @@ mod tests {
         );
         assert!(world.get::<EpisodeStart>(robot).is_some());
         assert!(world.get::<ParticleSet>(robot).unwrap().is_empty(), "the filter restarts with the episode");
+        assert!(world.get::<NeedsInit>(robot).is_some(), "and is marked for init_particles");
         let pose = world.get::<TruePose>(robot).unwrap().0;
         assert_ne!(pose, start, "a new random start pose");
         assert_eq!(world.get::<PreviousPose>(robot).unwrap().0, pose, "odometry must not see the teleport");
     }
 
-    #[test]
-    fn episode_reset_keeps_colliding_robots_apart() {
+    /// A component some schedule step might add to some robots, moving them to another archetype.
+    #[derive(Component)]
+    struct Extra;
+
+    /// Four colliding robots in the tiny room with one-step episodes; `extra` robots carry [`Extra`].
+    fn four_colliding_robots(extra: &[usize]) -> (World, Vec<Entity>) {
         let map = tiny_room();
         let (traversable, mut physics) =
             (TraversableMap::build(&map, 0.18).unwrap(), MapPhysics::from_map(&map, 0.1));
@@ -217,20 +230,27 @@ mod tests {
         let robots: Vec<Entity> = (0..4)
             .map(|k| {
                 let pose = (TruePose(starts[k]), PreviousPose(starts[k]));
-                world
-                    .spawn((
-                        OnMap(map_entity),
-                        bodies[k],
-                        Episode::default(),
-                        pose,
-                        ScenarioRng::seeded(k as u64),
-                    ))
-                    .id()
+                let id = (RobotId(k as u32), ScenarioRng::seeded(k as u64));
+                let mut robot = world.spawn((OnMap(map_entity), bodies[k], Episode::default(), pose, id));
+                if extra.contains(&k) {
+                    robot.insert(Extra);
+                }
+                robot.id()
             })
             .collect();
+        (world, robots)
+    }
+
+    fn poses(world: &World, robots: &[Entity]) -> Vec<Pose2> {
+        robots.iter().map(|&r| world.get::<TruePose>(r).unwrap().0).collect()
+    }
+
+    #[test]
+    fn episode_reset_keeps_colliding_robots_apart() {
+        let (mut world, robots) = four_colliding_robots(&[]);
         for _ in 0..30 {
             world.run_system_once(episode_reset).unwrap();
-            let poses: Vec<Pose2> = robots.iter().map(|&r| world.get::<TruePose>(r).unwrap().0).collect();
+            let poses = poses(&world, &robots);
             for a in 0..4 {
                 for b in a + 1..4 {
                     assert!(
@@ -239,6 +259,21 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    #[test]
+    fn episode_reset_places_robots_independently_of_their_components() {
+        let (mut plain, robots) = four_colliding_robots(&[]);
+        let (mut tagged, same_robots) = four_colliding_robots(&[0, 2]);
+        for step in 0..30 {
+            plain.run_system_once(episode_reset).unwrap();
+            tagged.run_system_once(episode_reset).unwrap();
+            assert_eq!(
+                poses(&plain, &robots),
+                poses(&tagged, &same_robots),
+                "restart {step}: an extra component on robots 0 and 2 must not move anyone"
+            );
         }
     }
 
@@ -262,7 +297,7 @@ mod tests {
                 Episode::default(),
                 TruePose(start),
                 PreviousPose(start),
-                ScenarioRng::seeded(3),
+                (RobotId(0), ScenarioRng::seeded(3)),
             ))
             .id();
         let mut visited = std::collections::HashSet::new();

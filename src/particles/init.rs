@@ -2,13 +2,16 @@
 //! pose), semi-global (uniform over traversable cells in a box around such a guess) and global
 //! (uniform over every traversable cell).
 //!
-//! Contract: an episode reset clears a robot's `ParticleSet`; `init_particles` fills every empty
-//! set and leaves non-empty ones alone, so it can run every step at no cost.
+//! Contract: a robot's filter starts afresh when it carries [`NeedsInit`] (spawned with it, and
+//! `episode_reset` inserts it); `init_particles` draws those robots' sets, removes the marker and
+//! leaves every other set alone, so it can run every step at no cost. A set that is empty
+//! *without* the marker lost its particles mid-episode: that is reported, never redrawn (a
+//! redraw would centre the new set on the true pose).
 
 use crate::params::{StepParams, expect_param};
 use crate::particles::set::{FilterHealth, ParticleError, ParticleSet};
 use crate::world::map::TraversableMap;
-use crate::world::{EpisodeRng, OccupancyMap, OnMap, Pose2, TruePose, wrap_angle};
+use crate::world::{FilterRng, OccupancyMap, OnMap, Pose2, TruePose, wrap_angle};
 use bevy::prelude::*;
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -89,6 +92,10 @@ impl InitParams {
         self.particles.unwrap_or(self.task.default_particles())
     }
 }
+
+/// Marks a robot whose particle set is to be drawn by the next `init_particles`.
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct NeedsInit;
 
 /// A freshly drawn set, with what the draw was centred on.
 #[derive(Clone, Debug, PartialEq)]
@@ -194,15 +201,28 @@ fn tracking_sigmas(params: &InitParams) -> (f32, f32) {
     (params.tracking_sigma_m.abs(), params.tracking_sigma_deg.abs().to_radians())
 }
 
-/// Reads TruePose, OnMap → the map's OccupancyMap + TraversableMap, InitParams. Writes empty
-/// ParticleSets (filled), EpisodeRng, FilterHealth.reinitialisations (semi-global fell back to global).
+/// Reads NeedsInit, TruePose, OnMap → the map's OccupancyMap + TraversableMap, InitParams. Writes
+/// the ParticleSets of robots marked NeedsInit (and removes the mark), FilterRng,
+/// FilterHealth.reinitialisations (semi-global fell back to global) and FilterHealth.emptied (an
+/// unmarked set found empty, left so).
 pub fn init_particles(
     params: Res<InitParams>,
     maps: Query<(&OccupancyMap, &TraversableMap)>,
-    mut robots: Query<(&TruePose, &OnMap, &mut ParticleSet, &mut EpisodeRng, &mut FilterHealth)>,
+    mut commands: Commands,
+    mut robots: Query<(
+        (Entity, Has<NeedsInit>),
+        (&TruePose, &OnMap),
+        (&mut ParticleSet, &mut FilterRng, &mut FilterHealth),
+    )>,
 ) {
-    for (truth, on_map, mut set, mut rng, mut health) in &mut robots {
-        if !set.is_empty() {
+    for ((robot, needs_init), (truth, on_map), (mut set, mut rng, mut health)) in &mut robots {
+        if !needs_init {
+            if set.is_empty() {
+                health.emptied += 1;
+                tracing::error!(
+                    "init_particles: robot {robot:?} lost every particle mid-episode; not redrawn"
+                );
+            }
             continue;
         }
         let Ok((map, traversable)) = maps.get(on_map.0) else {
@@ -213,6 +233,7 @@ pub fn init_particles(
             Ok(init) => {
                 health.reinitialisations += u32::from(init.fell_back_to_global);
                 *set = init.set;
+                commands.entity(robot).remove::<NeedsInit>();
             }
             Err(e) => tracing::warn!("init_particles: {e}"),
         }
@@ -243,21 +264,48 @@ mod tests {
     }
 
     #[test]
-    fn init_particles_fills_only_empty_sets() {
+    fn init_particles_fills_only_marked_sets() {
         let mut world = World::new();
         world.insert_resource(InitParams::default());
         let map = tiny_room();
         let traversable = free_cells(&map);
         let m = world.spawn((map, traversable)).id();
         let truth = TruePose(Pose2::new(1.0, 0.5, 0.0));
-        let empty = world.spawn((truth, OnMap(m), ParticleSet::default(), EpisodeRng::seeded(1))).id();
+        let robot = |set: ParticleSet, seed| (truth, OnMap(m), set, FilterRng::seeded(seed));
+        let marked = world.spawn((robot(ParticleSet::default(), 1), NeedsInit)).id();
         let kept = ParticleSet::from_weights(&[1.0, 1.0]);
-        let full = world.spawn((truth, OnMap(m), kept.clone(), EpisodeRng::seeded(2))).id();
+        let full = world.spawn((robot(kept.clone(), 2), NeedsInit)).id();
+        let running = world.spawn(robot(kept.clone(), 3)).id();
         world.run_system_once(init_particles).expect("init_particles runs");
-        let filled = world.get::<ParticleSet>(empty).expect("set");
+        let filled = world.get::<ParticleSet>(marked).expect("set").clone();
         assert_eq!(filled.len(), 300, "tracking default is 300 particles");
         assert!((filled.weights().iter().sum::<f32>() - 1.0).abs() < 1e-4, "uniform, normalised");
-        assert_eq!(world.get::<ParticleSet>(full), Some(&kept), "non-empty sets are left alone");
+        assert_eq!(
+            world.get::<ParticleSet>(full).unwrap().len(),
+            300,
+            "a marked set is redrawn whatever it held"
+        );
+        assert!(
+            world.get::<NeedsInit>(marked).is_none() && world.get::<NeedsInit>(full).is_none(),
+            "marks removed"
+        );
+        assert_eq!(world.get::<ParticleSet>(running), Some(&kept), "unmarked sets are left alone");
+        world.run_system_once(init_particles).expect("init_particles runs");
+        assert_eq!(world.get::<ParticleSet>(marked), Some(&filled), "drawn once per mark");
+    }
+
+    #[test]
+    fn init_particles_reports_a_set_emptied_mid_episode_without_redrawing() {
+        let mut world = World::new();
+        world.insert_resource(InitParams::default());
+        let map = tiny_room();
+        let traversable = free_cells(&map);
+        let m = world.spawn((map, traversable)).id();
+        let truth = TruePose(Pose2::new(1.0, 0.5, 0.0));
+        let lost = world.spawn((truth, OnMap(m), ParticleSet::default(), FilterRng::seeded(1))).id();
+        world.run_system_once(init_particles).expect("init_particles runs");
+        assert!(world.get::<ParticleSet>(lost).unwrap().is_empty(), "no silent redraw around the truth");
+        assert_eq!(world.get::<FilterHealth>(lost).unwrap().emptied, 1, "the loss is counted");
     }
 
     #[test]
@@ -303,7 +351,7 @@ mod tests {
         let m = world.spawn((map, t)).id();
         // True pose 20 m off, so the 3.3 m box around any plausible guess misses the map.
         let truth = TruePose(Pose2::new(-20.0, 0.5, 0.0));
-        let r = world.spawn((truth, OnMap(m), ParticleSet::default(), EpisodeRng::seeded(3))).id();
+        let r = world.spawn((truth, OnMap(m), ParticleSet::default(), FilterRng::seeded(3), NeedsInit)).id();
         world.run_system_once(init_particles).expect("init_particles runs");
         assert_eq!(world.get::<FilterHealth>(r).expect("health").reinitialisations, 1, "fallback counted");
         let set = world.get::<ParticleSet>(r).expect("set");

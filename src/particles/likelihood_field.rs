@@ -78,7 +78,33 @@ impl StepParams for LikelihoodFieldParams {
         expect_param(self.z_hit + self.z_rand > 0.0, "z_hit + z_rand", "> 0")?;
         expect_param(self.sigma_hit > 0.0, "sigma_hit", "a std-dev > 0 m")?;
         expect_param(self.max_beams > 0, "max_beams", "at least 1 beam")?;
-        expect_param(self.laser_likelihood_max_dist > 0.0, "laser_likelihood_max_dist", "a distance > 0 m")
+        expect_param(self.laser_likelihood_max_dist > 0.0, "laser_likelihood_max_dist", "a distance > 0 m")?;
+        self.check_far_beams_keep_a_likelihood()
+    }
+}
+
+impl LikelihoodFieldParams {
+    /// Without `z_rand`, a beam `laser_likelihood_max_dist` from any obstacle scores
+    /// z_hit·exp(−d²/2σ²), which a small `sigma_hit` rounds to 0 in f32: log −∞ on every particle
+    /// such a beam touches, and the weights reset to uniform. Rejected here, with the smallest
+    /// `sigma_hit` that keeps the score a normal f32.
+    fn check_far_beams_keep_a_likelihood(&self) -> Result<(), String> {
+        if self.combine != BeamCombination::Product || self.z_rand > 0.0 {
+            return Ok(());
+        }
+        let (d, floor) = (self.laser_likelihood_max_dist, f32::MIN_POSITIVE.ln());
+        let log_p_far = self.z_hit.ln() - d * d / (2.0 * self.sigma_hit * self.sigma_hit);
+        let sigma_min = d / (2.0 * (self.z_hit.ln() - floor)).sqrt();
+        expect_param(
+            log_p_far >= floor,
+            "sigma_hit",
+            &format!(
+                "at least {sigma_min:.3} m when z_rand = 0 (or z_rand > 0): with sigma_hit = {} m a beam \
+                 laser_likelihood_max_dist = {d} m from any obstacle has likelihood 0 in f32 (log −∞), \
+                 which would reset the weights to uniform",
+                self.sigma_hit
+            ),
+        )
     }
 }
 
@@ -116,11 +142,13 @@ fn beam_offsets(scan: &LidarScan, max_beams: usize, resolution_m: f32) -> Vec<(f
 }
 
 /// Each beam's summand at d_k = k·max_dist/(LEN−1): log p(d) for the product, p(d)³ for AMCL's sum.
-fn beam_term_table(params: &LikelihoodFieldParams, range_max_m: f32) -> Vec<f32> {
+/// Errors when a summand is not finite (log 0: parameters `StepParams::check` rejects, reaching
+/// the kernel unchecked), rather than letting it reset the weights.
+fn beam_term_table(params: &LikelihoodFieldParams, range_max_m: f32) -> Result<Vec<f32>, ParticleError> {
     let sigma = params.sigma_hit.max(1e-6);
     let rand = if range_max_m > 0.0 { params.z_rand / range_max_m } else { 0.0 };
     let max_dist = params.laser_likelihood_max_dist.max(1e-6);
-    (0..LOG_P_TABLE_LEN)
+    let table = (0..LOG_P_TABLE_LEN)
         .map(|k| {
             let d = k as f32 * max_dist / (LOG_P_TABLE_LEN - 1) as f32;
             let p = params.z_hit * (-d * d / (2.0 * sigma * sigma)).exp() + rand;
@@ -129,7 +157,14 @@ fn beam_term_table(params: &LikelihoodFieldParams, range_max_m: f32) -> Vec<f32>
                 BeamCombination::AmclCubeSum => p * p * p,
             }
         })
-        .collect()
+        .collect::<Vec<f32>>();
+    match table.iter().all(|t| t.is_finite()) {
+        true => Ok(table),
+        false => Err(ParticleError::InvalidParam {
+            field: "sigma_hit, z_rand",
+            expected: "a likelihood above 0 at laser_likelihood_max_dist (raise sigma_hit or z_rand)",
+        }),
+    }
 }
 
 /// Adds each particle's log-likelihood over the used beams — Σ log p, or ln(1 + Σ p³) for
@@ -137,7 +172,8 @@ fn beam_term_table(params: &LikelihoodFieldParams, range_max_m: f32) -> Vec<f32>
 /// `origin` is the world pose of the field's cell (0, 0) corner (the OccupancyMap origin); the
 /// field's own width/height/resolution give the rest of the geometry. Particles with a
 /// non-finite pose get a NaN log-weight, for the guard to drop. Errors (leaving the set
-/// untouched) when the field holds fewer than width × height distances.
+/// untouched) when the field holds fewer than width × height distances, or when the parameters
+/// give a beam likelihood of 0 (see [`LikelihoodFieldParams::check`]).
 pub fn add_log_likelihoods(
     set: &mut ParticleSet,
     scan: &LidarScan,
@@ -152,7 +188,7 @@ pub fn add_log_likelihoods(
     };
     let inv_res = 1.0 / field.resolution_m;
     let beams = beam_offsets(scan, params.max_beams, field.resolution_m);
-    let table = beam_term_table(params, scan.range_max_m);
+    let table = beam_term_table(params, scan.range_max_m)?;
     let finish = match params.combine {
         BeamCombination::Product => |sum: f32| sum,
         BeamCombination::AmclCubeSum => |sum: f32| sum.ln_1p(),
@@ -451,5 +487,44 @@ mod tests {
         assert_eq!(beam_indices(5, 3), vec![0, 2, 4]);
         assert_eq!(beam_indices(4, 60), vec![0, 1, 2, 3], "fewer rays than max_beams → all");
         assert!(beam_indices(10, 0).is_empty());
+    }
+
+    #[test]
+    fn likelihood_field_check_rejects_a_sigma_that_underflows_without_z_rand() {
+        let tight = LikelihoodFieldParams { z_rand: 0.0, sigma_hit: 0.1, ..Default::default() };
+        let message = tight.check().expect_err("exp(−2²/(2·0.1²)) = exp(−200) is 0 in f32");
+        assert!(message.starts_with("sigma_hit: expected at least 0.152 m when z_rand = 0"), "{message}");
+        assert_eq!(LikelihoodFieldParams { z_rand: 0.5, ..tight.clone() }.check(), Ok(()), "z_rand floors p");
+        assert_eq!(LikelihoodFieldParams { sigma_hit: 0.153, ..tight.clone() }.check(), Ok(()), "just above");
+        let cube = LikelihoodFieldParams { combine: BeamCombination::AmclCubeSum, ..tight.clone() };
+        assert_eq!(cube.check(), Ok(()), "1 + Σp³ stays finite when p³ underflows");
+        // Unchecked parameters reaching the kernel are an error, not a silent reset to uniform.
+        let (map, truth) = (tiny_room(), Pose2::new(0.6, 0.6, 0.3));
+        let mut set = ParticleSet::from_poses(&[truth, Pose2::new(30.0, 0.0, 0.0)]);
+        let before = set.clone();
+        let r = add_log_likelihoods(
+            &mut set,
+            &marched_scan(&map, truth),
+            &brute_field(&map),
+            &map.origin,
+            &tight,
+        );
+        assert!(matches!(r, Err(ParticleError::InvalidParam { field: "sigma_hit, z_rand", .. })), "{r:?}");
+        assert_eq!(set, before, "the set is left untouched");
+        let ok = LikelihoodFieldParams { sigma_hit: 0.153, ..tight };
+        add_log_likelihoods(&mut set, &marched_scan(&map, truth), &brute_field(&map), &map.origin, &ok)
+            .expect("the smallest accepted sigma_hit keeps every table entry finite");
+        assert!(set.log_w.iter().all(|l| l.is_finite()), "{:?}", set.log_w);
+    }
+
+    #[test]
+    fn likelihood_field_underflow_fails_when_the_schedule_loads() {
+        let text = r#"Schedule(steps: [("lidar", ()), ("init_particles", ()),
+            ("mcl_likelihood_field", (z_rand: 0.0, sigma_hit: 0.1))])"#;
+        let registry = crate::compose::standard_registry();
+        let path = std::path::Path::new("tight.ron");
+        let Err(err) = crate::compose::Pipeline::parse(text, path, &registry) else { panic!("rejected") };
+        let err = err.to_string();
+        assert!(err.contains("tight.ron") && err.contains("sigma_hit: expected at least"), "{err}");
     }
 }

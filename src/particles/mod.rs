@@ -1,5 +1,5 @@
 //! ② Particles: the particle set and the filter steps, in the order a step runs them:
-//! init (fills empty sets) → transition → likelihood_field, beam_model or pfnet → (augmented recovery) →
+//! init (draws the sets marked NeedsInit) → transition → likelihood_field, beam_model or pfnet → (augmented recovery) →
 //! resample (fixed or KLD-adapted count) →
 //! estimate. Each step is a plain kernel over a `ParticleSet` plus a small system; weights are
 //! log-weights, Σ exp = 1.
@@ -20,7 +20,9 @@ pub use beam_model::{
     weigh_beam_model,
 };
 pub use estimate::{PoseEstimate, estimate, estimate_pose};
-pub use init::{InitParams, Initialised, Task, draw_around_guess, draw_initial_set, init_particles};
+pub use init::{
+    InitParams, Initialised, NeedsInit, Task, draw_around_guess, draw_initial_set, init_particles,
+};
 pub use kld::{KldHistogram, KldParams};
 pub use likelihood_field::{
     LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,

@@ -6,7 +6,7 @@
 use crate::params::{StepParams, pretty_ron};
 use crate::particles::kld::{KldHistogram, KldParams};
 use crate::particles::set::{ParticleError, ParticleSet};
-use crate::world::EpisodeRng;
+use crate::world::FilterRng;
 use bevy::prelude::*;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -156,9 +156,9 @@ fn rebuild(set: &mut ParticleSet, picks: &[usize], q: &[f64], alpha: f32) {
     }
 }
 
-/// Reads ParticleSet weights, EpisodeRng, ResampleParams. Writes ParticleSet (resampled when the
+/// Reads ParticleSet weights, FilterRng, ResampleParams. Writes ParticleSet (resampled when the
 /// ESS policy fires).
-pub fn resample(params: Res<ResampleParams>, mut robots: Query<(&mut ParticleSet, &mut EpisodeRng)>) {
+pub fn resample(params: Res<ResampleParams>, mut robots: Query<(&mut ParticleSet, &mut FilterRng)>) {
     robots.par_iter_mut().for_each(|(mut set, mut rng)| {
         if should_resample(&set, params.ess_threshold) {
             resample_with(&mut set, &params, &mut rng.0);
@@ -181,7 +181,7 @@ mod tests {
     fn resample_keeps_count_and_normalises() {
         let mut world = World::new();
         world.insert_resource(ResampleParams::default());
-        let e = world.spawn((ParticleSet::from_weights(&[0.7, 0.1, 0.1, 0.1]), EpisodeRng::seeded(7))).id();
+        let e = world.spawn((ParticleSet::from_weights(&[0.7, 0.1, 0.1, 0.1]), FilterRng::seeded(7))).id();
         world.run_system_once(resample).expect("resample runs");
         let set = world.get::<ParticleSet>(e).expect("set still there");
         assert_eq!(set.len(), 4, "resampling keeps the particle count");
@@ -218,9 +218,9 @@ mod tests {
     fn resample_respects_ess_threshold() {
         let mut world = World::new();
         world.insert_resource(ResampleParams { alpha: 1.0, ess_threshold: Some(0.5), kld: None });
-        let flat = world.spawn((ParticleSet::from_weights(&[1.0; 4]), EpisodeRng::seeded(1))).id();
+        let flat = world.spawn((ParticleSet::from_weights(&[1.0; 4]), FilterRng::seeded(1))).id();
         let peaked =
-            world.spawn((ParticleSet::from_weights(&[1.0, 0.0, 0.0, 0.0]), EpisodeRng::seeded(2))).id();
+            world.spawn((ParticleSet::from_weights(&[1.0, 0.0, 0.0, 0.0]), FilterRng::seeded(2))).id();
         world.run_system_once(resample).expect("resample runs");
         let flat_x = &world.get::<ParticleSet>(flat).expect("flat set").x;
         assert_eq!(flat_x, &vec![0.0, 1.0, 2.0, 3.0], "ESS/N = 1 ≥ 0.5: no resampling");
@@ -270,8 +270,8 @@ mod tests {
         let mut world = World::new();
         let kld = KldParams { min_particles: 5, max_particles: 50, ..Default::default() };
         world.insert_resource(ResampleParams { alpha: 0.5, ess_threshold: None, kld: Some(kld) });
-        let converged = world.spawn((line_of(40, 0.001), EpisodeRng::seeded(4))).id();
-        let spread = world.spawn((line_of(40, 0.5), EpisodeRng::seeded(5))).id();
+        let converged = world.spawn((line_of(40, 0.001), FilterRng::seeded(4))).id();
+        let spread = world.spawn((line_of(40, 0.5), FilterRng::seeded(5))).id();
         world.run_system_once(resample).expect("resample runs");
         assert_eq!(world.get::<ParticleSet>(converged).expect("set").len(), 5, "one bin → min_particles");
         assert_eq!(

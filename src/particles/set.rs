@@ -8,7 +8,8 @@ use thiserror::Error;
 
 /// A robot's belief as weighted pose hypotheses, stored structure-of-arrays so kernels and
 /// networks stream over contiguous memory. Log-weights are normalised: Σ exp(log_w) = 1.
-/// An empty set means "not initialised yet": an episode reset clears it, `init_particles` refills it.
+/// A set is drawn afresh when its robot carries `NeedsInit` (at spawn and at every episode
+/// reset), never because it is empty.
 #[derive(Component, Clone, Debug, Default, PartialEq)]
 #[require(FilterHealth, PoseEstimate, LikelihoodStats)]
 pub struct ParticleSet {
@@ -32,6 +33,9 @@ pub struct FilterHealth {
     pub reinitialisations: u32,
     /// Particles replaced by uniform draws over the traversable map (`augmented_recovery`).
     pub injected: u32,
+    /// Steps at which `init_particles` found the set empty mid-episode (without `NeedsInit`):
+    /// some step removed every particle; the set is left empty, not redrawn.
+    pub emptied: u32,
 }
 
 /// What the last observation update measured before normalising: the input of augmented MCL's

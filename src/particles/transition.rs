@@ -5,7 +5,7 @@ use crate::params::{StepParams, expect_param};
 use crate::particles::set::ParticleSet;
 use crate::sense::Odometry;
 use crate::world::rng::stream;
-use crate::world::{EpisodeRng, Pose2};
+use crate::world::{FilterRng, Pose2};
 use bevy::prelude::*;
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -63,10 +63,10 @@ pub fn propagate(set: &mut ParticleSet, delta: &Pose2, params: &TransitionParams
         });
 }
 
-/// Reads Odometry, TransitionParams. Writes ParticleSet poses, EpisodeRng (one stream key per call).
+/// Reads Odometry, TransitionParams. Writes ParticleSet poses, FilterRng (one stream key per call).
 pub fn transition(
     params: Res<TransitionParams>,
-    mut robots: Query<(&Odometry, &mut ParticleSet, &mut EpisodeRng)>,
+    mut robots: Query<(&Odometry, &mut ParticleSet, &mut FilterRng)>,
 ) {
     for (odometry, mut set, mut rng) in &mut robots {
         let key: u64 = rng.0.random();
@@ -87,7 +87,7 @@ mod tests {
         world.insert_resource(TransitionParams { trans_noise_m: 0.0, rot_noise_deg: 0.0 });
         let set = ParticleSet::from_poses(&[Pose2::new(1.0, 1.0, FRAC_PI_2), Pose2::new(0.0, 0.0, 0.0)]);
         let odometry = Odometry { delta: Pose2::new(0.5, 0.0, 0.25) };
-        let e = world.spawn((set, odometry, EpisodeRng::seeded(5))).id();
+        let e = world.spawn((set, odometry, FilterRng::seeded(5))).id();
         world.run_system_once(transition).expect("transition runs");
         let set = world.get::<ParticleSet>(e).expect("set");
         assert!(

@@ -2,7 +2,7 @@
 
 use crate::params::{StepParams, expect_param};
 use crate::sense::raycast::RayGrid;
-use crate::world::{EpisodeRng, OnMap, Pose2, RobotParams, TruePose};
+use crate::world::{OnMap, Pose2, RobotParams, SensorRng, TruePose};
 use bevy::prelude::*;
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -104,14 +104,14 @@ pub fn noise_and_clamp(scan: &mut LidarScan, std_m: f32, rng: &mut impl Rng) {
     }
 }
 
-/// Reads TruePose, OnMap, the map's RayGrid, EpisodeRng. Writes LidarScan.
+/// Reads TruePose, OnMap, the map's RayGrid, SensorRng. Writes LidarScan.
 /// Casting runs in parallel across robots (rayon); noise is drawn afterwards robot by robot from
-/// each one's EpisodeRng, so results never depend on the thread count.
+/// each one's SensorRng, so results never depend on the thread count.
 pub fn lidar(
     params: Res<LidarParams>,
     robot_params: Res<RobotParams>,
     maps: Query<&RayGrid>,
-    mut robots: Query<(Entity, &TruePose, &OnMap, &mut LidarScan, &mut EpisodeRng)>,
+    mut robots: Query<(Entity, &TruePose, &OnMap, &mut LidarScan, &mut SensorRng)>,
 ) {
     let bodies: Vec<(Entity, Entity, Pose2)> = robots.iter().map(|(e, p, m, ..)| (e, m.0, p.0)).collect();
     let mut work: Vec<_> = robots
@@ -146,7 +146,7 @@ mod tests {
     use std::f32::consts::FRAC_PI_2;
 
     fn spawn_robot(world: &mut World, map: Entity, pose: Pose2, seed: u64) -> Entity {
-        world.spawn((TruePose(pose), OnMap(map), LidarScan::default(), EpisodeRng::seeded(seed))).id()
+        world.spawn((TruePose(pose), OnMap(map), LidarScan::default(), SensorRng::seeded(seed))).id()
     }
 
     #[test]
@@ -211,7 +211,7 @@ mod tests {
     fn lidar_noise_std_is_right() {
         let mut scan =
             LidarScan { ranges_m: vec![2.0; 20000], range_min_m: 0.05, range_max_m: 5.6, ..default() };
-        noise_and_clamp(&mut scan, 0.1, &mut EpisodeRng::seeded(5).0);
+        noise_and_clamp(&mut scan, 0.1, &mut SensorRng::seeded(5).0);
         let n = scan.ranges_m.len() as f32;
         let mean = scan.ranges_m.iter().sum::<f32>() / n;
         let std = (scan.ranges_m.iter().map(|r| (r - mean).powi(2)).sum::<f32>() / n).sqrt();

@@ -1,7 +1,7 @@
 //! Odometry: the robot's motion since the previous agent step, in its previous frame, with noise.
 
 use crate::params::{StepParams, expect_param};
-use crate::world::{EpisodeRng, Pose2, PreviousPose, TruePose, wrap_angle};
+use crate::world::{Pose2, PreviousPose, SensorRng, TruePose, wrap_angle};
 use bevy::prelude::*;
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -47,10 +47,10 @@ pub fn noisy_delta(previous: Pose2, current: Pose2, params: &OdometryParams, rng
     delta
 }
 
-/// Reads TruePose, PreviousPose, EpisodeRng. Writes Odometry, PreviousPose (= TruePose).
+/// Reads TruePose, PreviousPose, SensorRng. Writes Odometry, PreviousPose (= TruePose).
 pub fn odometry(
     params: Res<OdometryParams>,
-    mut robots: Query<(&TruePose, &mut PreviousPose, &mut Odometry, &mut EpisodeRng)>,
+    mut robots: Query<(&TruePose, &mut PreviousPose, &mut Odometry, &mut SensorRng)>,
 ) {
     for (pose, mut previous, mut odom, mut rng) in robots.iter_mut() {
         odom.delta = noisy_delta(previous.0, pose.0, &params, &mut rng.0);
@@ -70,7 +70,7 @@ mod tests {
         world.insert_resource(OdometryParams { trans_noise_m: 0.0, rot_noise_deg: 0.0 });
         let (before, after) = (Pose2::new(1.0, 2.0, 3.0), Pose2::new(1.3, 1.8, -2.9));
         let robot = world
-            .spawn((TruePose(after), PreviousPose(before), Odometry::default(), EpisodeRng::seeded(1)))
+            .spawn((TruePose(after), PreviousPose(before), Odometry::default(), SensorRng::seeded(1)))
             .id();
         world.run_system_once(odometry).unwrap();
         let delta = world.get::<Odometry>(robot).unwrap().delta;
@@ -83,7 +83,7 @@ mod tests {
     #[test]
     fn odometry_noise_has_the_configured_spread() {
         let params = OdometryParams::default();
-        let mut rng = EpisodeRng::seeded(2);
+        let mut rng = SensorRng::seeded(2);
         let (p, q) = (Pose2::new(0.0, 0.0, 0.5), Pose2::new(0.0, 0.0, 0.5));
         let n = 20000;
         let draws: Vec<Pose2> = (0..n).map(|_| noisy_delta(p, q, &params, &mut rng.0)).collect();

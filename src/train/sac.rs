@@ -15,10 +15,11 @@ use crate::episode::Episode;
 use crate::nn::checkpoint::Checkpoint;
 use crate::nn::sac::{SacLearner, SacNetConfig};
 use crate::plugin::headless_app;
+use crate::world::RobotRngs;
 use crate::world::rng::stream;
-use crate::world::{EpisodeRng, ScenarioRng};
 use anyhow::Context;
 use bevy::prelude::*;
+use rand::Rng;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -177,12 +178,8 @@ impl SacTrainer {
         if self.step.is_multiple_of(self.episode_steps) {
             let (seed, episode) = (self.config.seed, self.step / self.episode_steps);
             for (index, &robot) in self.robots.iter().enumerate() {
-                let key = [seed, index as u64, episode];
-                let mut entity = self.app.world_mut().entity_mut(robot);
-                entity.insert((
-                    ScenarioRng(stream(&[key[0], key[1], key[2], 1])),
-                    EpisodeRng(stream(&[key[0], key[1], key[2], 2])),
-                ));
+                let key = stream(&[seed, index as u64, episode]).random::<u64>();
+                self.app.world_mut().entity_mut(robot).insert(RobotRngs::seeded(key));
             }
             self.agent_mut().rng = stream(&[seed, 0x5ac, episode]);
         }

@@ -7,5 +7,5 @@ pub mod robot;
 
 pub use map::{Cell, OccupancyMap};
 pub use pose::{Pose2, angle_error, circular_mean, wrap_angle};
-pub use rng::{EpisodeRng, ScenarioRng};
-pub use robot::{OnMap, PreviousPose, Robot, RobotParams, TruePose};
+pub use rng::{FilterRng, RobotRngs, ScenarioRng, SensorRng};
+pub use robot::{OnMap, PreviousPose, Robot, RobotId, RobotParams, TruePose, in_id_order};

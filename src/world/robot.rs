@@ -9,6 +9,20 @@ use serde::{Deserialize, Serialize};
 #[require(TruePose, PreviousPose)]
 pub struct Robot;
 
+/// A robot's number in its world, assigned at spawn in spawn order (0, 1, …). Systems whose
+/// outcome depends on the order they visit robots (episode restarts, the order finished episodes
+/// are recorded in, batched policies) visit them by this id: a query's own order follows the
+/// archetypes, so it changes whenever a schedule adds a component to some robots.
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct RobotId(pub u32);
+
+/// The given robots, ordered by their [`RobotId`].
+pub fn in_id_order<'a>(robots: impl Iterator<Item = (Entity, &'a RobotId)>) -> Vec<Entity> {
+    let mut ordered: Vec<(RobotId, Entity)> = robots.map(|(entity, id)| (*id, entity)).collect();
+    ordered.sort_unstable();
+    ordered.into_iter().map(|(_, entity)| entity).collect()
+}
+
 /// Ground-truth pose, written by physics; only metrics and sensors' simulation may read it.
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
 pub struct TruePose(pub Pose2);

@@ -12,6 +12,7 @@ use crate::episode::{Episode, EpisodeEnd, EpisodeParams};
 use crate::nn::sac::{ACTION_LEN, Observations, PolicyWorkspace, STATE_LEN, SacNetworks};
 use crate::params::StepParams;
 use crate::sense::LocalGrid;
+use crate::world::{RobotId, in_id_order};
 use bevy::prelude::*;
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -70,7 +71,7 @@ pub struct PolicyState {
 }
 
 type RobotView<'a> = (
-    Entity,
+    (Entity, &'a RobotId),
     &'a BeliefCrop,
     &'a LocalGrid,
     &'a Collided,
@@ -80,8 +81,8 @@ type RobotView<'a> = (
     &'a mut Action,
 );
 
-/// Reads BeliefCrop, LocalGrid, Collided, Episode, EpisodeEnd, Reward, the last Action, the
-/// learning agent (if any). Writes Action; with a learning agent, its replay buffer.
+/// Reads BeliefCrop, LocalGrid, Collided, Episode, EpisodeEnd, Reward, the last Action, RobotId
+/// (the batch order), the learning agent (if any). Writes Action; with a learning agent, its replay buffer.
 pub fn sac_policy(
     params: Res<SacPolicyParams>,
     episode: Res<EpisodeParams>,
@@ -100,10 +101,8 @@ pub fn sac_policy(
             }
         }
     }
-    state.robots.clear();
-    state.robots.extend(robots.iter().map(|r| r.0));
     // A stable order, so batches (and random draws) do not depend on archetype layout.
-    state.robots.sort_unstable();
+    state.robots = in_id_order(robots.iter().map(|r| r.0));
     let n = state.robots.len();
     let shape = {
         let nets = agent
@@ -221,7 +220,15 @@ mod tests {
         let crop = BeliefCrop { cells: 5, centres: vec![], values: vec![0.5; 100] };
         let grid = LocalGrid { cells: 5, values: vec![1.0; 25] };
         let robot = world
-            .spawn((crop, grid, Collided(false), Episode::default(), Reward(None), Action::default()))
+            .spawn((
+                RobotId(0),
+                crop,
+                grid,
+                Collided(false),
+                Episode::default(),
+                Reward(None),
+                Action::default(),
+            ))
             .id();
         // (episode step, reward of the last action, last step?)
         let frames = [
@@ -276,7 +283,15 @@ mod tests {
             };
             let grid = LocalGrid { cells: 5, values: vec![0.5; 25] };
             let robot = world
-                .spawn((crop, grid, Collided(false), Episode::default(), Reward(None), Action::default()))
+                .spawn((
+                    RobotId(0),
+                    crop,
+                    grid,
+                    Collided(false),
+                    Episode::default(),
+                    Reward(None),
+                    Action::default(),
+                ))
                 .id();
             world.run_system_once(sac_policy).unwrap();
             *world.get::<Action>(robot).unwrap()
