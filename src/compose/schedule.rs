@@ -365,7 +365,8 @@ mod tests {
         parse(&steps("(use_estimate: true)", r#"("estimate", ()), "#)).expect("an estimate step comes first");
         let registry = standard_registry();
         let mut p = parse(&steps("()", "")).expect("valid");
-        let e = p.set_params("goalnav_policy", "(use_estimate: true)", &registry).expect_err("no estimate");
+        let e = p.replace_step("goalnav_policy", "goalnav_policy", "(use_estimate: true)", &registry);
+        let e = e.expect_err("no estimate");
         assert!(e.contains("needs PoseEstimate"), "overrides are validated too: {e}");
     }
 

@@ -7,6 +7,7 @@
 //! the last 25 % of the episode.
 
 use crate::act::Collided;
+use crate::belief::BeliefCrop;
 use crate::episode::reset::{Episode, EpisodeParams};
 use crate::particles::{ParticleSet, PoseEstimate};
 use crate::world::{OnMap, Pose2, RobotId, TruePose, angle_error, wrap_angle};
@@ -54,10 +55,46 @@ pub struct EpisodeLog {
     /// Collisions seen at this episode's steps 2…T, i.e. caused by its first T − 1 actions
     /// (the last action's outcome is only seen after the episode ends).
     pub collisions: u32,
+    /// The estimate's belief crop at `FIGURE_CROPS` evenly spaced steps, when the schedule makes
+    /// one (`belief_crop`): what the agent saw, for figures.
+    pub crops: Vec<CropSnapshot>,
 }
 
 /// Particles kept per episode for figures; a stride subsample of larger sets.
 pub const FIGURE_PARTICLES: usize = 1000;
+
+/// Belief crops kept per episode for figures: the first step, the last and evenly between.
+pub const FIGURE_CROPS: usize = 5;
+
+/// The free-space and particle-weight channels of one belief crop, in bytes (weights relative to
+/// the crop's heaviest cell), in the crop's layout: the estimate at the centre facing up.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CropSnapshot {
+    pub step: u32,
+    pub cells: usize,
+    pub free: Vec<u8>,
+    pub weight: Vec<u8>,
+}
+
+impl CropSnapshot {
+    fn of(crop: &BeliefCrop, step: u32) -> Self {
+        let to_byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+        let weight = crop.channel(0, 1);
+        let heaviest = weight.iter().copied().fold(0.0f32, f32::max).max(f32::MIN_POSITIVE);
+        CropSnapshot {
+            step,
+            cells: crop.cells,
+            free: crop.channel(0, 0).iter().map(|&v| to_byte(v)).collect(),
+            weight: weight.iter().map(|&w| to_byte(w / heaviest)).collect(),
+        }
+    }
+}
+
+/// Whether step `step` (1-based) of a `steps`-step episode is one of its `FIGURE_CROPS` snapshots.
+fn is_snapshot_step(step: u32, steps: u32) -> bool {
+    let last = (FIGURE_CROPS - 1) as u32;
+    (0..=last).any(|k| 1 + ((k * steps.saturating_sub(1)) as f32 / last as f32).round() as u32 == step)
+}
 
 /// One finished episode, as the evaluation harness aggregates and draws it.
 #[derive(Clone, Debug, PartialEq)]
@@ -73,9 +110,9 @@ pub struct EpisodeRecord {
 #[derive(Resource, Clone, Debug, Default)]
 pub struct CompletedEpisodes(pub Vec<EpisodeRecord>);
 
-/// Reads TruePose, PoseEstimate, Episode, EpisodeParams, Collided, ParticleSet, RobotId. Writes
-/// StepError, EpisodeLog, CompletedEpisodes (when an episode's last step is logged, in RobotId
-/// order).
+/// Reads TruePose, PoseEstimate, Episode, EpisodeParams, Collided, ParticleSet, BeliefCrop,
+/// RobotId. Writes StepError, EpisodeLog, CompletedEpisodes (when an episode's last step is
+/// logged, in RobotId order).
 pub fn step_metrics(
     params: Res<EpisodeParams>,
     mut completed: ResMut<CompletedEpisodes>,
@@ -83,13 +120,13 @@ pub fn step_metrics(
         (Entity, &RobotId),
         &OnMap,
         (&TruePose, &PoseEstimate, &Episode),
-        (Option<&Collided>, Option<&ParticleSet>),
+        (Option<&Collided>, Option<&ParticleSet>, Option<&BeliefCrop>),
         &mut StepError,
         &mut EpisodeLog,
     )>,
 ) {
     let mut finished = Vec::new();
-    for ((robot, id), on_map, (truth, estimate, episode), (collided, particles), mut error, mut log) in
+    for ((robot, id), on_map, (truth, estimate, episode), (collided, particles, crop), mut error, mut log) in
         &mut robots
     {
         *error = StepError::between(&estimate.pose, &truth.0);
@@ -106,6 +143,9 @@ pub fn step_metrics(
         log.errors.push(*error);
         log.truth.push(truth.0);
         log.estimates.push(estimate.pose);
+        if let Some(crop) = crop.filter(|c| c.cells > 0 && is_snapshot_step(episode.step, params.steps)) {
+            log.crops.push(CropSnapshot::of(crop, episode.step));
+        }
         if episode.step == params.steps {
             let log = std::mem::take(&mut *log);
             finished.push((*id, EpisodeRecord { robot, map: on_map.0, episode: episode.index, log }));
@@ -167,6 +207,21 @@ mod tests {
 
     fn err(pos: f32) -> StepError {
         StepError { pos_err_m: pos, orient_err_rad: 0.1, loss: pos * pos }
+    }
+
+    #[test]
+    fn crop_snapshots_span_the_episode_and_scale_weights_to_the_heaviest_cell() {
+        let steps: Vec<u32> = (1..=50).filter(|&s| is_snapshot_step(s, 50)).collect();
+        assert_eq!(steps, [1, 13, 26, 38, 50]);
+        assert_eq!((1..=3).filter(|&s| is_snapshot_step(s, 3)).count(), 3, "short episodes: every step");
+        let cells = 2;
+        let mut values = vec![0.0; crate::belief::BELIEF_CHANNELS * cells * cells];
+        values[..4].copy_from_slice(&[1.0, 0.0, 0.5, 1.0]); // free space
+        values[4..8].copy_from_slice(&[0.1, 0.4, 0.0, 0.2]); // particle weight
+        let crop = BeliefCrop { cells, centres: vec![Pose2::default()], values };
+        let snapshot = CropSnapshot::of(&crop, 7);
+        assert_eq!(snapshot.free, [255, 0, 128, 255]);
+        assert_eq!(snapshot.weight, [64, 255, 0, 128]);
     }
 
     #[test]

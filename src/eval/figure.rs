@@ -1,9 +1,10 @@
 //! The paper-style figure of one episode: left, the map around the episode (north up) with the
 //! particles after the first filter update, the true path drawn over the estimate, their start
 //! and final poses, the final error and a scale bar; right, position and heading error over the
-//! episode's steps.
+//! episode's steps; below, when the schedule made one, the belief crop the agent read at a few
+//! steps.
 
-use crate::episode::{EpisodeLog, EpisodeRecord, SUCCESS_RADIUS_M, succeeded};
+use crate::episode::{CropSnapshot, EpisodeLog, EpisodeRecord, SUCCESS_RADIUS_M, succeeded};
 use crate::eval::cell::ResultRow;
 use crate::eval::font::register_sans_serif;
 use crate::world::map::render;
@@ -18,6 +19,11 @@ use std::io::Cursor;
 const SIZE: (u32, u32) = (1400, 700);
 const TITLE_H: i32 = 50;
 const MAP_PANEL: (i32, i32, u32, u32) = (15, 55, 670, 560);
+/// The strip of belief crops under the panels: its height, pixels per crop cell, and the top
+/// of the crops within it.
+const CROP_STRIP_H: u32 = 300;
+const CROP_PX: u32 = 4;
+const CROP_TOP: i32 = 45;
 /// Space shown around the episode's trajectories and particles (metres).
 const MARGIN_M: f32 = 2.0;
 const TRUTH: RGBColor = RGBColor(0, 150, 60);
@@ -125,7 +131,8 @@ pub fn episode_figure(
     }
     let poses = log.truth.iter().chain(&log.estimates).map(|p| (p.x, p.y));
     let view = View::fit(map, poses.chain(log.first_particles.iter().copied()));
-    let mut canvas = RgbImage::from_pixel(SIZE.0, SIZE.1, Rgb([255, 255, 255]));
+    let height = SIZE.1 + if log.crops.is_empty() { 0 } else { CROP_STRIP_H };
+    let mut canvas = RgbImage::from_pixel(SIZE.0, height, Rgb([255, 255, 255]));
     let background = render(map, None);
     let crop = imageops::crop_imm(
         &background,
@@ -139,21 +146,84 @@ pub fn episode_figure(
     imageops::replace(&mut canvas, &scaled, view.left as i64, view.top as i64);
     {
         register_sans_serif();
-        let root = BitMapBackend::with_buffer(&mut canvas, SIZE).into_drawing_area();
-        draw_map_overlay(&root, map, &view, log)?;
+        let root = BitMapBackend::with_buffer(&mut canvas, (SIZE.0, height)).into_drawing_area();
+        let (main, _) = root.split_vertically(SIZE.1);
+        draw_map_overlay(&main, map, &view, log)?;
         let centred = Pos::new(HPos::Center, VPos::Center);
         let font = ("sans-serif", 40).into_font().color(&BLACK).pos(centred);
-        root.draw(&Text::new(title, (SIZE.0 as i32 / 2, TITLE_H / 2 + 5), font)).map_err(draw_err)?;
-        let (_, right) = root.split_horizontally(MAP_PANEL.0 as u32 + MAP_PANEL.2 + 15);
+        main.draw(&Text::new(title, (SIZE.0 as i32 / 2, TITLE_H / 2 + 5), font)).map_err(draw_err)?;
+        let (_, right) = main.split_horizontally(MAP_PANEL.0 as u32 + MAP_PANEL.2 + 15);
         let (_, right) = right.split_vertically(TITLE_H);
         let (top, bottom) = right.split_vertically((SIZE.1 - TITLE_H as u32) / 2);
         let pos: Vec<f32> = log.errors.iter().map(|e| e.pos_err_m).collect();
         let yaw: Vec<f32> = log.errors.iter().map(|e| e.orient_err_rad).collect();
         error_chart(&top, &pos, "position error (m)", Some(SUCCESS_RADIUS_M))?;
         error_chart(&bottom, &yaw, "|heading error| (rad)", None)?;
+        draw_crop_labels(&root, &log.crops)?;
         root.present().map_err(draw_err)?;
     }
+    // After the overlay, whose masks white out everything under the map panel.
+    for (k, snapshot) in log.crops.iter().enumerate() {
+        let (x, y) = crop_corner(k, log.crops.len(), snapshot.cells);
+        imageops::replace(&mut canvas, &crop_image(snapshot), x as i64, y as i64);
+    }
     Ok(canvas)
+}
+
+/// Top-left pixel of the `k`-th of `count` crops of `cells`² in the strip, centred in equal slots.
+fn crop_corner(k: usize, count: usize, cells: usize) -> (i32, i32) {
+    let slot = (SIZE.0 as i32 - 2 * MAP_PANEL.0) / count.max(1) as i32;
+    let side = (cells as u32 * CROP_PX) as i32;
+    (MAP_PANEL.0 + k as i32 * slot + (slot - side) / 2, SIZE.1 as i32 + CROP_TOP)
+}
+
+/// A crop as the figure shows it: free space light, obstacles and unknown dark, particle weight
+/// blending into blue (the heaviest cell fully blue; a square root shows light modes beside a
+/// heavy one), `CROP_PX` pixels per cell.
+fn crop_image(snapshot: &CropSnapshot) -> RgbImage {
+    let n = snapshot.cells as u32;
+    let image = RgbImage::from_fn(n, n, |col, row| {
+        let cell = (row * n + col) as usize;
+        let grey = 60.0 + 180.0 * f32::from(snapshot.free[cell]) / 255.0;
+        let alpha = (f32::from(snapshot.weight[cell]) / 255.0).sqrt();
+        let blend = |c: u8| (grey * (1.0 - alpha) + f32::from(c) * alpha).round() as u8;
+        Rgb([blend(PARTICLE.0), blend(PARTICLE.1), blend(PARTICLE.2)])
+    });
+    imageops::resize(&image, n * CROP_PX, n * CROP_PX, imageops::FilterType::Nearest)
+}
+
+/// The strip's heading; around each crop a frame, ticks at the estimate and its step.
+fn draw_crop_labels<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    crops: &[CropSnapshot],
+) -> Result<(), FigureError> {
+    let Some(first) = crops.first() else { return Ok(()) };
+    let left = Pos::new(HPos::Left, VPos::Center);
+    let heading = "the agent's belief crop, centred on the estimate (ticks), heading up: free space light, particle weight blue";
+    let at = (MAP_PANEL.0 + 5, SIZE.1 as i32 + CROP_TOP / 2);
+    root.draw(&Text::new(heading, at, TEXT.into_font().color(&BLACK).pos(left))).map_err(draw_err)?;
+    let side = (first.cells as u32 * CROP_PX) as i32;
+    for (k, snapshot) in crops.iter().enumerate() {
+        let (x, y) = crop_corner(k, crops.len(), snapshot.cells);
+        root.draw(&Rectangle::new([(x - 1, y - 1), (x + side, y + side)], BLACK.stroke_width(1)))
+            .map_err(draw_err)?;
+        // Ticks outside the frame point at the centre (the estimate), leaving its cells visible.
+        let (cx, cy) = (x + side / 2, y + side / 2);
+        for tick in [[(cx, y - 10), (cx, y - 2)], [(cx, y + side + 1), (cx, y + side + 9)]]
+            .into_iter()
+            .chain([[(x - 10, cy), (x - 2, cy)], [(x + side + 1, cy), (x + side + 9, cy)]])
+        {
+            root.draw(&PathElement::new(tick.to_vec(), ESTIMATE.stroke_width(2))).map_err(draw_err)?;
+        }
+        let centred = Pos::new(HPos::Center, VPos::Center);
+        let label = Text::new(
+            format!("step {}", snapshot.step),
+            (cx, y + side + 22),
+            TEXT.into_font().color(&BLACK).pos(centred),
+        );
+        root.draw(&label).map_err(draw_err)?;
+    }
+    Ok(())
 }
 
 /// Particles, paths, start and final poses (clipped to the map crop), a frame, the legend and a
@@ -170,8 +240,15 @@ fn draw_map_overlay<DB: DrawingBackend>(
     // The estimate first and wide, the truth over it and thin: where they agree, both show.
     let paths = [(&log.estimates, ESTIMATE, 6), (&log.truth, TRUTH, 2)];
     for (poses, colour, width) in paths {
+        // Segment by segment with round joints: plotters' mitred joins of one wide path shoot
+        // spikes across the figure where a robot turning on the spot reverses its path.
         let path: Vec<(i32, i32)> = poses.iter().map(|p| view.pixel(map, p.x, p.y)).collect();
-        root.draw(&PathElement::new(path, colour.stroke_width(width))).map_err(draw_err)?;
+        for segment in path.windows(2) {
+            root.draw(&PathElement::new(segment.to_vec(), colour.stroke_width(width))).map_err(draw_err)?;
+        }
+        for &joint in &path {
+            root.draw(&Circle::new(joint, width / 2, colour.filled())).map_err(draw_err)?;
+        }
     }
     for (poses, colour, _) in paths {
         let (Some(first), Some(last)) = (poses.first(), poses.last()) else { continue };
@@ -183,7 +260,8 @@ fn draw_map_overlay<DB: DrawingBackend>(
     // Clip: white out the left panel around the map crop (estimates may leave the map).
     let (w, h) = view.size();
     let (l, t, r, b) = (view.left, view.top, view.left + w as i32, view.top + h as i32);
-    let (panel_r, panel_b) = (MAP_PANEL.0 + MAP_PANEL.2 as i32 + 14, MAP_PANEL.1 + MAP_PANEL.3 as i32 + 4);
+    // Down to the figure's bottom: a path leaving the map must not cross the belief crops' strip.
+    let (panel_r, panel_b) = (MAP_PANEL.0 + MAP_PANEL.2 as i32 + 14, (SIZE.1 + CROP_STRIP_H) as i32);
     for mask in [
         [(0, 0), (panel_r, t - 1)],
         [(0, b), (panel_r, panel_b)],
@@ -387,6 +465,7 @@ mod tests {
             first_particles,
             first_particle_count: 200,
             collisions: 0,
+            crops: Vec::new(),
         };
         EpisodeRecord { robot: Entity::PLACEHOLDER, map: Entity::PLACEHOLDER, episode: 3, log }
     }
@@ -446,6 +525,30 @@ mod tests {
         );
         let png = encode_png(&img).expect("encode");
         assert!(image::load_from_memory(&png).is_ok(), "PNG decodes");
+    }
+
+    #[test]
+    fn belief_crops_are_drawn_in_a_strip_under_the_panels() {
+        let mut record = record();
+        let cells = 10;
+        let snapshot = |step: u32, heavy: usize| {
+            let mut weight = vec![0u8; cells * cells];
+            weight[heavy] = 255;
+            CropSnapshot { step, cells, free: vec![255; cells * cells], weight }
+        };
+        record.log.crops = vec![snapshot(1, 0), snapshot(5, cells * cells - 1)];
+        let img = episode_figure(&tiny_room(), &record, "t").expect("figure");
+        assert_eq!(img.dimensions(), (SIZE.0, SIZE.1 + CROP_STRIP_H), "the strip extends the figure");
+        let blue = |p: &Rgb<u8>| p.0 == [PARTICLE.0, PARTICLE.1, PARTICLE.2];
+        let light = |p: &Rgb<u8>| p.0 == [240, 240, 240];
+        let side = (cells as u32 * CROP_PX) as i32;
+        let (x0, y0) = crop_corner(0, 2, cells);
+        let (x1, y1) = crop_corner(1, 2, cells);
+        let cell_centre = |(x, y): (i32, i32), i: i32, j: i32| (x + i * 4 + 2, y + j * 4 + 2);
+        assert!(near(&img, cell_centre((x0, y0), 0, 0), 0, blue), "first crop: heaviest cell top-left");
+        assert!(near(&img, cell_centre((x1, y1), 9, 9), 0, blue), "second crop: bottom-right");
+        assert!(near(&img, cell_centre((x0, y0), 9, 9), 0, light), "free, weightless cells are light");
+        assert!(x1 > x0 + side, "crops side by side");
     }
 
     #[test]
