@@ -35,7 +35,7 @@ pub enum BagError {
 
     /// The file ends inside a record, as a recording that was killed does.
     #[error(
-        "{path} ends in the middle of a record ({source}): the recording was cut short; \
+        "{path} ends in the middle of a record: the recording was cut short; \
          `mcap recover {path} -o repaired.mcap` saves what was written"
     )]
     Truncated {
@@ -64,8 +64,10 @@ pub enum BagError {
     MissingTopic { path: PathBuf, topic: String, flag: &'static str, available: String },
 
     /// The topic carries another message type, or is not CDR-encoded.
-    #[error("{path}: topic {topic} carries {found}; expected {expected} (message encoding `cdr`)")]
-    WrongType { path: PathBuf, topic: String, expected: &'static str, found: String },
+    #[error(
+        "{path}: topic {topic} (set by {flag}) carries {found}; expected {expected} (message encoding `cdr`)"
+    )]
+    WrongType { path: PathBuf, topic: String, flag: &'static str, expected: &'static str, found: String },
 
     /// One message cannot be decoded or used; `index` is 1-based, in file order on its topic.
     #[error("{path}: topic {topic}, message {index}: {source}")]

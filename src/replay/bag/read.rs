@@ -195,11 +195,11 @@ impl TopicMessages {
                 source,
             };
             if *topic == topics.scan {
-                check_type(&message, LASER_SCAN, path)?;
+                check_type(&message, LASER_SCAN, "--scan-topic", path)?;
                 out.scans.push(LaserScanMsg::decode(&message.data).map_err(decode_error)?);
             }
             if *topic == topics.odom {
-                check_type(&message, ODOMETRY, path)?;
+                check_type(&message, ODOMETRY, "--odom-topic", path)?;
                 out.odometry.push(OdometryMsg::decode(&message.data).map_err(decode_error)?);
             }
         }
@@ -219,11 +219,11 @@ impl TopicMessages {
     }
 }
 
-/// The messages of an MCAP file in file order, chunk CRCs checked. No record may claim more than
-/// 8 × the file's size or 64 MiB, whichever is larger: a damaged length field then is an error
-/// rather than an allocation of exabytes (mcap's `MessageStream` sets no such bound on the
-/// decompressed size of a chunk), while a real chunk — 768 KiB by default in rosbag2, compressed
-/// far less than 8× — always fits.
+/// The messages of an MCAP file in file order, chunk CRCs checked. No record or decompressed
+/// chunk may claim more than 64 MiB or 8 × the file's size, whichever is larger: a damaged length
+/// field is then an error rather than an allocation of exabytes (mcap 0.26's `MessageStream` sets
+/// no bound on a chunk's decompressed size), while real chunks fit — rosbag2 closes a chunk at
+/// 768 KiB, and a larger one holds a single large message that the file holds too, compressed.
 fn mcap_messages(bytes: &[u8]) -> impl Iterator<Item = McapResult<Message<'static>>> + '_ {
     let limit = bytes.len().saturating_mul(8).max(64 << 20);
     let options =
@@ -250,7 +250,12 @@ fn schema_name(message: &Message) -> String {
     message.channel.schema.as_ref().map_or_else(|| "no schema".into(), |s| s.name.clone())
 }
 
-fn check_type(message: &Message, expected: &'static str, path: &Path) -> Result<(), BagError> {
+fn check_type(
+    message: &Message,
+    expected: &'static str,
+    flag: &'static str,
+    path: &Path,
+) -> Result<(), BagError> {
     let (schema, encoding) = (schema_name(message), &message.channel.message_encoding);
     if schema == expected && encoding == "cdr" {
         return Ok(());
@@ -258,6 +263,7 @@ fn check_type(message: &Message, expected: &'static str, path: &Path) -> Result<
     Err(BagError::WrongType {
         path: path.into(),
         topic: message.channel.topic.clone(),
+        flag,
         expected,
         found: format!("{schema} (message encoding `{encoding}`)"),
     })
