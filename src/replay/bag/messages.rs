@@ -26,10 +26,12 @@ impl Header {
         f64::from(self.stamp_sec) + f64::from(self.stamp_nanosec) * 1e-9
     }
 
-    /// A header stamped `t` seconds (rounded to the nanosecond).
+    /// A header stamped `t` seconds (rounded to the nanosecond). Whole seconds and the fraction
+    /// are split first: `t × 10⁹` of an epoch stamp is past f64's exact integers.
     pub fn at(t: f64, frame_id: &str) -> Self {
-        let nanos = (t * 1e9).round() as i64;
-        let (sec, nanosec) = (nanos.div_euclid(1_000_000_000), nanos.rem_euclid(1_000_000_000));
+        let whole = t.floor();
+        let nanos = ((t - whole) * 1e9).round() as i64; // in 0..=10⁹
+        let (sec, nanosec) = (whole as i64 + nanos / 1_000_000_000, nanos % 1_000_000_000);
         Self { stamp_sec: sec as i32, stamp_nanosec: nanosec as u32, frame_id: frame_id.into() }
     }
 
@@ -258,5 +260,7 @@ mod tests {
         let h = Header::at(1_700_000_000.25, "f");
         assert_eq!((h.stamp_sec, h.stamp_nanosec), (1_700_000_000, 250_000_000), "{h:?}");
         assert_eq!(Header::at(-0.25, "f").stamp_s(), -0.25);
+        let just_below = Header::at(2.0 - 1e-12, "f");
+        assert_eq!((just_below.stamp_sec, just_below.stamp_nanosec), (2, 0), "rounding carries into seconds");
     }
 }
