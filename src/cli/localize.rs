@@ -1,6 +1,6 @@
 //! `apfn localize`: runs the classical particle filter (likelihood-field MCL) on a recorded JSON
-//! Lines log and a ROS map, writing one estimate per line — how users localize their own robot's
-//! data, and how apfn is compared with other localizers on identical input.
+//! Lines log or ROS 2 bag and a ROS map, writing one estimate per scan — how users localize their
+//! own robot's data, and how apfn is compared with other localizers on identical input.
 //!
 //! Start: tracking and semi-global draw around `--init` when given (used as it is), else around
 //! the first line's `truth` perturbed as the task prescribes; global needs neither. Every input
@@ -10,6 +10,7 @@
 
 use crate::cli::count;
 use crate::particles::{InitParams, KldParams, ResampleParams, Task};
+use crate::replay::bag::{BagLog, BagTopics, read_bag};
 use crate::replay::{
     EstimateLine, FIT_TOLERANCE_M, InitialGuess, Localizer, LocalizerParams, LogLine, MIN_FIT, read_log,
     to_jsonl,
@@ -19,9 +20,10 @@ use crate::world::{Pose2, angle_error, wrap_angle};
 use anyhow::{Context, ensure};
 use bevy::prelude::default;
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Clone, Debug, PartialEq)]
+#[command(group(clap::ArgGroup::new("input").required(true).args(["log", "bag"])))]
 pub struct LocalizeArgs {
     /// ROS map_server YAML of the map the log was recorded in.
     #[arg(long)]
@@ -29,7 +31,18 @@ pub struct LocalizeArgs {
     /// The log: one JSON object per line {t, odom, ranges, angle_min, angle_increment, range_min,
     /// range_max, truth?}.
     #[arg(long)]
-    pub log: PathBuf,
+    pub log: Option<PathBuf>,
+    /// Or a ROS 2 bag: a rosbag2 MCAP file (`ros2 bag record -s mcap /scan /odom`) with
+    /// sensor_msgs/msg/LaserScan and nav_msgs/msg/Odometry; the odometry is interpolated at each
+    /// scan's header stamp.
+    #[arg(long, value_name = "FILE.mcap")]
+    pub bag: Option<PathBuf>,
+    /// The bag's LaserScan topic [default: /scan].
+    #[arg(long, conflicts_with = "log")]
+    pub scan_topic: Option<String>,
+    /// The bag's Odometry topic [default: /odom].
+    #[arg(long, conflicts_with = "log")]
+    pub odom_topic: Option<String>,
     /// Particles. Default: the task's paper count (tracking 300, semi_global 500, global 3000).
     #[arg(long)]
     pub particles: Option<usize>,
@@ -70,11 +83,10 @@ pub struct TruthErrors {
 pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
     let params = localizer_params(&args)?;
     let map = load_ros_map(&args.map).with_context(|| format!("--map {}", args.map.display()))?;
-    let lines = read_log(&args.log)?;
+    let (input, lines) = read_input(&args)?;
     let guess = initial_guess(&args, &lines[0]);
-    let mut filter = Localizer::new(map, params, guess, args.seed).with_context(|| {
-        format!("starting the filter on map {} and log {}", args.map.display(), args.log.display())
-    })?;
+    let mut filter = Localizer::new(map, params, guess, args.seed)
+        .with_context(|| format!("starting the filter on map {} and {input}", args.map.display()))?;
     println!("{}", start_line(&filter, guess));
     if filter.fell_back_to_global() {
         eprintln!(
@@ -143,6 +155,43 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The lines to localize from `--log` or `--bag`, and what they came from ("log F" / "bag F").
+/// For a bag, prints what was read: counts, frames and scans dropped for lack of odometry.
+fn read_input(args: &LocalizeArgs) -> anyhow::Result<(String, Vec<LogLine>)> {
+    let ((Some(path), None) | (None, Some(path))) = (&args.log, &args.bag) else {
+        anyhow::bail!("expected exactly one of --log and --bag");
+    };
+    if args.log.is_some() {
+        return Ok((format!("log {}", path.display()), read_log(path)?));
+    }
+    let defaults = BagTopics::default();
+    let topics = BagTopics {
+        scan: args.scan_topic.clone().unwrap_or(defaults.scan),
+        odom: args.odom_topic.clone().unwrap_or(defaults.odom),
+    };
+    let bag = read_bag(path, &topics)?;
+    println!("{}", bag_line(path, &topics, &bag));
+    Ok((format!("bag {}", path.display()), bag.lines))
+}
+
+/// What `--bag` read, in one line.
+fn bag_line(path: &Path, topics: &BagTopics, bag: &BagLog) -> String {
+    let (odom_frame, base_frame) = &bag.odom_frames;
+    let dropped = match bag.dropped() {
+        0 => String::new(),
+        n => format!("; dropped {} outside the odometry's time span", count(n as u64, "scan")),
+    };
+    format!(
+        "read {} of {} (frame `{}`) and {} of {} (`{odom_frame}` → `{base_frame}`) from {}{dropped}",
+        count(bag.scans as u64, "scan"),
+        topics.scan,
+        bag.scan_frame,
+        count(bag.odometry as u64, "odometry message"),
+        topics.odom,
+        path.display()
+    )
 }
 
 /// Mean [`scan_fit`](crate::replay::scan_fit) of every scan at its estimate; `None` when no scan

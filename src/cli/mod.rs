@@ -36,7 +36,7 @@ pub enum Command {
     Eval(eval::EvalArgs),
     /// Simulate a scene and write one robot's odometry + LiDAR as a JSON Lines log for replay.
     Record(record::RecordArgs),
-    /// Run the particle filter on a recorded log and a ROS map; write one estimate per line.
+    /// Run the particle filter on a recorded log or ROS 2 bag and a ROS map; write one estimate per scan.
     Localize(localize::LocalizeArgs),
     /// Run an eval config for many seeds as independent jobs; merge to mean ± 95 % CI tables.
     Sweep(sweep::SweepArgs),

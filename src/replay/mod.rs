@@ -1,8 +1,10 @@
 //! Offline replay: localize recorded data without the simulator. `log` reads and writes the JSON
 //! Lines formats (ROS LaserScan fields + odometry pose in, one estimate per line out);
 //! `localizer` is the classical particle filter as a plain struct (`Localizer::new`, `update`);
-//! `fit` tells whether a log's scans belong to the map.
+//! `fit` tells whether a log's scans belong to the map; `bag` reads the same lines from a ROS 2
+//! bag (MCAP).
 
+pub mod bag;
 mod error;
 mod fit;
 mod localizer;
