@@ -66,10 +66,14 @@ pub const ALL: [Limit; 14] = [
 pub const MAP_RESOLUTION_M: (f64, f64) = (0.005, 0.5);
 /// Pixels on either side of a map image (nav2's example maps are at most a few hundred).
 pub const MAP_SIDE_PX: u64 = 10_000;
-/// Pixels of a map image: the fine grid and its derived layers take ≈ 30 bytes per cell.
+/// Pixels of a map image: the fine grid and each layer derived from it hold a value per cell.
 pub const MAP_PIXELS: u64 = 25_000_000;
 /// Metres on either side of a map (image side × resolution): the 0.1 m network map grows with it.
 pub const MAP_SIDE_M: f64 = 1_000.0;
+/// Cells of all the maps of one scene or eval map group together: every map is generated or
+/// decoded, and kept with its layers, before the first step (1,000 paper-size apartments take
+/// 40 million).
+pub const SCENE_MAP_CELLS: u64 = 50_000_000;
 /// Metres from the world origin to a map's origin: f32 positions keep millimetres up to here.
 pub const MAP_ORIGIN_M: f64 = 10_000.0;
 

@@ -19,7 +19,7 @@ pub struct FuzzArgs {
     /// Seed of the mutations: the same seed gives the same inputs.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Milliseconds an input may take before it counts as slow; it counts as a hang after 30 times as long.
+    /// Milliseconds an input may take before it counts as slow; it counts as a hang after 60 times as long (CPU time of the loading thread on Linux).
     #[arg(long, default_value_t = 1_000)]
     pub budget_ms: u64,
     /// The repository, whose `scenes/` and `systems/` hold the valid files to mutate.

@@ -9,7 +9,9 @@ use crate::act::PhysicsParams;
 use crate::compose::error::{ComposeError, read_ron};
 use crate::compose::paths::relative_to_file;
 use crate::episode::EpisodeParams;
-use crate::limits::{EPISODE_STEPS, MAPS, PHYSICS_SUBSTEPS, ROBOTS_PER_MAP, ROBOTS_PER_WORLD};
+use crate::limits::{
+    EPISODE_STEPS, MAPS, PHYSICS_SUBSTEPS, ROBOTS_PER_MAP, ROBOTS_PER_WORLD, SCENE_MAP_CELLS, thousands,
+};
 use crate::world::map::load_ros_map;
 use crate::world::map::procedural::{ApartmentParams, Split, generate_apartment};
 use crate::world::{OccupancyMap, RobotParams};
@@ -150,7 +152,7 @@ impl Scene {
             let size = split.seeds().end - split.seeds().start;
             let message = format!(
                 "expected first + count ≤ {} (the split's seeds), got {first} + {count}",
-                crate::limits::thousands(size)
+                thousands(size)
             );
             return Err(invalid("maps.first", &message));
         }
@@ -159,6 +161,18 @@ impl Scene {
         {
             let field = format!("maps.params.{}", e.field);
             return Err(invalid(&field, &format!("expected {}, got {}", e.expected, e.got)));
+        }
+        if let MapSource::Procedural { count, params, .. } = &self.maps {
+            let side_cells =
+                f64::from((params.max_side_m + 2.0 * params.margin_m) / params.resolution_m).ceil();
+            let cells = *count as f64 * side_cells * side_cells;
+            if cells > SCENE_MAP_CELLS as f64 {
+                let message = format!(
+                    "expected at most {} map cells in all (count × ((max_side_m + 2·margin_m) / resolution_m)²), got {count} × {side_cells}²",
+                    thousands(SCENE_MAP_CELLS)
+                );
+                return Err(invalid("maps", &message));
+            }
         }
         if let MapSource::Ros { path: Some(_), paths } = &self.maps
             && !paths.is_empty()
@@ -172,17 +186,25 @@ impl Scene {
                     NamedMap { name: format!("apartment_{seed}"), map: generate_apartment(seed, params) }
                 })
                 .collect(),
-            MapSource::Ros { path: one, paths } => one
-                .iter()
-                .chain(paths)
-                .map(|p| {
+            MapSource::Ros { path: one, paths } => {
+                let mut maps = Vec::new();
+                let mut cells = 0;
+                for p in one.iter().chain(paths) {
                     let map = load_ros_map(&relative_to_file(path, p))
                         .map_err(|e| invalid("maps", &e.to_string()))?;
+                    // Each image's size was checked before decoding; this bounds their sum.
+                    cells += map.cells.len() as u64;
+                    if cells > SCENE_MAP_CELLS {
+                        let message =
+                            format!("expected at most {} map cells in all", thousands(SCENE_MAP_CELLS));
+                        return Err(invalid("maps", &message));
+                    }
                     let name =
                         p.file_stem().map_or_else(|| p.display().to_string(), |s| s.to_string_lossy().into());
-                    Ok(NamedMap { name, map })
-                })
-                .collect::<Result<_, ComposeError>>()?,
+                    maps.push(NamedMap { name, map });
+                }
+                maps
+            }
         };
         Ok(LoadedScene { path: path.to_owned(), scene: self, maps })
     }
@@ -253,6 +275,9 @@ mod tests {
             ),
             "{e}"
         );
+        let big = "maps: Procedural(split: seen, count: 16, params: (min_side_m: 5.0, max_side_m: 100, max_rooms: 5))";
+        let (e, _) = scene_error(big);
+        assert!(e.contains("field `maps`: expected at most 50,000,000 map cells in all"), "{e}");
         let (e, _) = scene_error("maps: Procedural(split: seen), physics: (substeps: 0)");
         assert!(e.contains("field `physics.substeps`: expected 1 to 100"), "{e}");
     }

@@ -2,7 +2,9 @@
 //! written to a scratch folder and loaded on a worker thread under `catch_unwind`. Each input
 //! ends as ok, a clean error, a panic, or slow (over the time budget); an input still running
 //! after [`HANG_FACTOR`] budgets is a hang and ends the target's run (its thread cannot be
-//! stopped). Panicking, slow and hanging inputs are saved for reproduction.
+//! stopped). Time is the worker thread's CPU time where Linux reports it, so a busy machine does
+//! not turn slow inputs into hangs; elsewhere it is wall-clock. Panicking, slow and hanging inputs
+//! are saved for reproduction.
 
 use crate::fuzz::mutate::{corpus_words, mutate};
 use crate::fuzz::targets::{Sample, Target, context, tempfile_dir};
@@ -17,7 +19,7 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 /// An input still running after this many time budgets is reported as a hang.
-pub const HANG_FACTOR: u32 = 30;
+pub const HANG_FACTOR: u32 = 60;
 
 /// Stack of the worker thread: the main thread's 8 MiB, so recursion limits are tested as the
 /// CLI meets them.
@@ -111,22 +113,29 @@ fn run_inputs(
     let words = corpus_words(&all_files);
     let (to_worker, inbox) = mpsc::channel::<PathBuf>();
     let (outbox, from_worker) = mpsc::channel::<(Outcome, Duration)>();
-    std::thread::Builder::new().name(format!("fuzz-{}", target.name)).stack_size(WORKER_STACK).spawn(
-        move || {
-            QUIET_PANICS.with(|q| q.set(true));
-            for entry in inbox {
-                let started = Instant::now();
-                let outcome = match catch_unwind(AssertUnwindSafe(|| (target.load)(&entry))) {
-                    Ok(Ok(())) => Outcome::Ok,
-                    Ok(Err(_)) => Outcome::CleanError,
-                    Err(payload) => Outcome::Panic(panic_message(payload.as_ref())),
-                };
-                if outbox.send((outcome, started.elapsed())).is_err() {
-                    break;
-                }
+    let (clock_out, clock_in) = mpsc::channel::<WorkerClock>();
+    let worker = move || {
+        QUIET_PANICS.with(|q| q.set(true));
+        let clock = WorkerClock::current();
+        let _ = clock_out.send(clock.clone());
+        for entry in inbox {
+            let started = clock.now();
+            let outcome = match catch_unwind(AssertUnwindSafe(|| (target.load)(&entry))) {
+                Ok(Ok(())) => Outcome::Ok,
+                Ok(Err(_)) => Outcome::CleanError,
+                Err(payload) => Outcome::Panic(panic_message(payload.as_ref())),
+            };
+            if outbox.send((outcome, clock.now().saturating_sub(started))).is_err() {
+                break;
             }
-        },
-    )?;
+        }
+    };
+    std::thread::Builder::new()
+        .name(format!("fuzz-{}", target.name))
+        .stack_size(WORKER_STACK)
+        .spawn(worker)?;
+    let clock = clock_in.recv().map_err(io::Error::other)?;
+    let hang_after = options.budget * HANG_FACTOR;
     let mut previous: Vec<String> = Vec::new();
     for i in 0..options.inputs {
         let mut rng = stream(&[options.seed, target_key, i]);
@@ -137,15 +146,20 @@ fn run_inputs(
         }
         write_files(scratch, &input.files)?;
         previous.extend(input.files.iter().map(|f| f.0.clone()));
+        let sent = clock.now();
         to_worker.send(scratch.join(&input.files[0].0)).map_err(io::Error::other)?;
         report.inputs += 1;
-        let Ok((outcome, took)) = from_worker.recv_timeout(options.budget * HANG_FACTOR) else {
+        let answer = loop {
+            match from_worker.recv_timeout(options.budget) {
+                Ok(answer) => break Some(answer),
+                Err(_) if clock.now().saturating_sub(sent) < hang_after => continue,
+                Err(_) => break None,
+            }
+        };
+        let Some((outcome, took)) = answer else {
             report.hangs += 1;
             let saved = save(options, target.name, i, &input, "hang")?;
-            report.findings.push(format!(
-                "input {i}: still running after {:?} (a hang){saved}",
-                options.budget * HANG_FACTOR
-            ));
+            report.findings.push(format!("input {i}: still running after {hang_after:?} (a hang){saved}"));
             return Ok(());
         };
         report.slowest = report.slowest.max(took);
@@ -165,6 +179,35 @@ fn run_inputs(
         }
     }
     Ok(())
+}
+
+/// The worker thread's clock: its CPU time from `/proc/<pid>/task/<tid>/schedstat` when Linux
+/// has it (readable from any thread), else wall-clock time.
+#[derive(Clone)]
+struct WorkerClock {
+    schedstat: Option<PathBuf>,
+    wall: Instant,
+}
+
+impl WorkerClock {
+    /// The calling thread's clock.
+    fn current() -> Self {
+        let schedstat = std::fs::read_link("/proc/thread-self")
+            .ok()
+            .map(|task| Path::new("/proc").join(task).join("schedstat"))
+            .filter(|path| cpu_time(path).is_some());
+        WorkerClock { schedstat, wall: Instant::now() }
+    }
+
+    fn now(&self) -> Duration {
+        self.schedstat.as_deref().and_then(cpu_time).unwrap_or_else(|| self.wall.elapsed())
+    }
+}
+
+/// The first field of a schedstat file: nanoseconds on the CPU.
+fn cpu_time(schedstat: &Path) -> Option<Duration> {
+    let text = std::fs::read_to_string(schedstat).ok()?;
+    text.split_whitespace().next()?.parse().ok().map(Duration::from_nanos)
 }
 
 /// One corpus sample with one of its files mutated (usually the entry file).
