@@ -5,11 +5,13 @@
 //! depth, odometry), `particles` (the filter), `belief` (its projection for the agent), `agent` (policies), `act` (drive and physics),
 //! then `episode` bookkeeping; `compose` turns RON files into schedules; `eval` writes results
 //! tables and `sweep` repeats them across seeds as independent jobs; `replay` runs the filter
-//! on recorded logs; `cli` is the binary's.
+//! on recorded logs; `limits` bounds every count a file can set and `fuzz` mutates every input
+//! file to check the loaders; `cli` is the binary's.
 
 // Systems state their inputs as query tuples; naming each tuple would hide what a system reads.
 #![allow(clippy::type_complexity)]
 
+pub mod limits;
 pub mod params;
 
 pub mod stage;
@@ -39,6 +41,8 @@ pub mod eval;
 pub mod sweep;
 
 pub mod replay;
+
+pub mod fuzz;
 
 pub mod plugin;
 

@@ -43,7 +43,7 @@ impl Default for BeliefParams {
 
 impl StepParams for BeliefParams {
     fn check(&self) -> Result<(), String> {
-        expect_param(self.cells > 0, "cells", "at least 1 cell")?;
+        crate::limits::RASTER_SIDE.check("cells", self.cells)?;
         expect_param(self.resolution_m > 0.0, "resolution_m", "a cell side > 0 m")?;
         expect_param(self.modes > 0, "modes", "at least 1 crop (the estimate)")?;
         expect_param(self.mode_bin_m > 0.0, "mode_bin_m", "a bin side > 0 m")

@@ -3,6 +3,7 @@
 
 pub mod collect;
 pub mod eval;
+pub mod fuzz;
 pub mod localize;
 pub mod map;
 pub mod pfnet;
@@ -55,6 +56,8 @@ pub enum Command {
     /// List the registered systems with their parameters.
     #[command(subcommand)]
     Systems(systems::SystemsCommand),
+    /// Mutate the valid input files and load each as the CLI does; count panics and hangs.
+    Fuzz(fuzz::FuzzArgs),
 }
 
 /// Runs the parsed command line.
@@ -72,13 +75,14 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::TrainSac(args) => train_sac::run(args),
         Command::Sac(command) => sac::run(command),
         Command::Collect(args) => collect::run(args),
+        Command::Fuzz(args) => fuzz::run(args),
     }
 }
 
 /// Sizes rayon's global pool; results never depend on it, only speed does.
 pub fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
     if let Some(n) = threads {
-        anyhow::ensure!(n > 0, "--threads: expected at least 1 thread");
+        crate::limits::THREADS.check("--threads", n).map_err(anyhow::Error::msg)?;
         rayon::ThreadPoolBuilder::new().num_threads(n).build_global()?;
     }
     Ok(())

@@ -108,7 +108,8 @@ pub struct RunSummary {
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     set_threads(args.threads)?;
-    anyhow::ensure!(args.worlds > 0, "--worlds: expected at least 1 world");
+    crate::limits::WORLDS.check("--worlds", args.worlds).map_err(anyhow::Error::msg)?;
+    crate::limits::RUN_STEPS.check("--steps", args.steps).map_err(anyhow::Error::msg)?;
     let (loaded, pipeline) = args.input.load()?;
     let robots_per_world = loaded.maps.len() * loaded.scene.robots_per_map;
 

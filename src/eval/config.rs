@@ -14,6 +14,7 @@ use crate::compose::{
     ComposeError, MapSource, Pipeline, Scene, read_ron, relative_to_file, standard_registry,
 };
 use crate::episode::EpisodeParams;
+use crate::limits::{EPISODES, PARTICLES};
 use crate::particles::Task;
 use crate::world::RobotParams;
 use crate::world::map::procedural::{ApartmentParams, Split};
@@ -168,14 +169,16 @@ impl EvalConfig {
                 return Err(invalid(field, "expected at least one entry".into()));
             }
         }
-        if self.episodes == 0 {
-            return Err(invalid("episodes", "expected at least 1 episode per cell".into()));
+        if !EPISODES.contains(self.episodes) {
+            let message = format!("expected {}, got {}", EPISODES.expected, self.episodes);
+            return Err(invalid("episodes", message));
         }
-        if self.particles == Some(0) {
-            return Err(invalid(
-                "particles",
-                "expected at least 1 particle (or leave it out for the task defaults)".into(),
-            ));
+        if let Some(n) = self.particles
+            && !PARTICLES.contains(n)
+        {
+            let message =
+                format!("expected {} (or leave it out for the task defaults), got {n}", PARTICLES.expected);
+            return Err(invalid("particles", message));
         }
         let registry = standard_registry();
         let mut schedules = self

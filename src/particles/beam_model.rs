@@ -75,7 +75,7 @@ impl StepParams for BeamModelParams {
         expect_param(weights.iter().sum::<f32>() > 0.0, "z_hit + z_short + z_max + z_rand", "> 0")?;
         expect_param(self.sigma_hit > 0.0, "sigma_hit", "a std-dev > 0 m")?;
         expect_param(self.lambda_short > 0.0, "lambda_short", "a rate > 0")?;
-        expect_param(self.max_beams > 0, "max_beams", "at least 1 beam")
+        crate::limits::BEAMS.check("max_beams", self.max_beams)
     }
 }
 

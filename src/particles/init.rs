@@ -80,7 +80,9 @@ impl Default for InitParams {
 
 impl StepParams for InitParams {
     fn check(&self) -> Result<(), String> {
-        expect_param(self.particles != Some(0), "particles", "at least 1 (or None for the task default)")?;
+        if let Some(n) = self.particles {
+            crate::limits::PARTICLES.check("particles", n)?;
+        }
         expect_param(self.tracking_sigma_m >= 0.0, "tracking_sigma_m", "a std-dev ≥ 0 m")?;
         expect_param(self.tracking_sigma_deg >= 0.0, "tracking_sigma_deg", "a std-dev ≥ 0°")?;
         expect_param(self.semi_global_box_m > 0.0, "semi_global_box_m", "a box side > 0 m")

@@ -53,6 +53,9 @@ impl KldParams {
         if self.min_particles == 0 || self.min_particles > self.max_particles {
             return invalid("resample.kld", "1 ≤ min_particles ≤ max_particles");
         }
+        if !crate::limits::PARTICLES.contains(self.max_particles) {
+            return invalid("resample.kld.max_particles", crate::limits::PARTICLES.expected);
+        }
         if !(self.bin_size_m > 0.0 && self.bin_size_deg > 0.0) {
             return invalid("resample.kld", "positive bin_size_m and bin_size_deg");
         }

@@ -77,7 +77,7 @@ impl StepParams for LikelihoodFieldParams {
         expect_param(self.z_hit >= 0.0 && self.z_rand >= 0.0, "z_hit, z_rand", "mixture weights ≥ 0")?;
         expect_param(self.z_hit + self.z_rand > 0.0, "z_hit + z_rand", "> 0")?;
         expect_param(self.sigma_hit > 0.0, "sigma_hit", "a std-dev > 0 m")?;
-        expect_param(self.max_beams > 0, "max_beams", "at least 1 beam")?;
+        crate::limits::BEAMS.check("max_beams", self.max_beams)?;
         expect_param(self.laser_likelihood_max_dist > 0.0, "laser_likelihood_max_dist", "a distance > 0 m")?;
         self.check_far_beams_keep_a_likelihood()
     }

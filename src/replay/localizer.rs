@@ -69,8 +69,13 @@ impl Default for LocalizerParams {
 impl LocalizerParams {
     /// Checks the ranges a caller could get wrong.
     pub fn validate(&self) -> Result<(), ReplayError> {
-        if self.init.particles == Some(0) {
-            return Err(ReplayError::InvalidParam { field: "particles", expected: "at least 1 particle" });
+        if let Some(n) = self.init.particles
+            && !crate::limits::PARTICLES.contains(n)
+        {
+            return Err(ReplayError::InvalidParam {
+                field: "particles",
+                expected: crate::limits::PARTICLES.expected,
+            });
         }
         if !(self.robot_radius_m >= 0.0 && self.robot_radius_m.is_finite()) {
             return Err(ReplayError::InvalidParam { field: "robot_radius_m", expected: "a radius ≥ 0 m" });

@@ -203,6 +203,13 @@ impl Fields<'_> {
         let Some(items) = value.as_array().filter(|a| !a.is_empty()) else {
             return Err(self.error("ranges", EXPECTED, preview(value)));
         };
+        if !crate::limits::BEAMS.contains(items.len()) {
+            return Err(self.error(
+                "ranges",
+                crate::limits::BEAMS.expected,
+                format!("{} ranges", items.len()),
+            ));
+        }
         items
             .iter()
             .map(|v| match v {

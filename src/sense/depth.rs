@@ -29,7 +29,7 @@ impl Default for DepthParams {
 
 impl StepParams for DepthParams {
     fn check(&self) -> Result<(), String> {
-        expect_param(self.columns > 0, "columns", "at least 1 column")?;
+        crate::limits::DEPTH_COLUMNS.check("columns", self.columns)?;
         expect_param(self.fov_deg > 0.0 && self.fov_deg < 180.0, "fov_deg", "a field of view in (0, 180)")?;
         expect_param(self.min_m >= 0.0 && self.min_m < self.max_m, "min_m, max_m", "0 ≤ min_m < max_m")
     }

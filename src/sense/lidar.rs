@@ -54,7 +54,7 @@ impl Default for LidarParams {
 
 impl StepParams for LidarParams {
     fn check(&self) -> Result<(), String> {
-        expect_param(self.rays > 0, "rays", "at least 1 ray")?;
+        crate::limits::BEAMS.check("rays", self.rays)?;
         expect_param(self.fov_deg > 0.0 && self.fov_deg <= 360.0, "fov_deg", "a field of view in (0, 360]")?;
         expect_param(
             self.range_min_m >= 0.0 && self.range_min_m < self.range_max_m,

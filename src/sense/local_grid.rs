@@ -36,7 +36,8 @@ impl Default for LocalGridParams {
 
 impl StepParams for LocalGridParams {
     fn check(&self) -> Result<(), String> {
-        expect_param(self.cells > 0 && self.out_cells > 0, "cells, out_cells", "at least 1 cell")?;
+        crate::limits::RASTER_SIDE.check("cells", self.cells)?;
+        crate::limits::RASTER_SIDE.check("out_cells", self.out_cells)?;
         expect_param(self.extent_m > 0.0, "extent_m", "an extent > 0 m")?;
         expect_param(self.footprint_radius_m >= 0.0, "footprint_radius_m", "a radius ≥ 0 m")
     }

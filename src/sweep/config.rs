@@ -19,6 +19,7 @@
 
 use crate::compose::{read_ron, relative_to_file};
 use crate::eval::{EvalConfig, LoadedEval};
+use crate::limits::SEEDS;
 use crate::sweep::error::SweepError;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -57,8 +58,8 @@ impl SweepConfig {
             field: field.to_owned(),
             message,
         };
-        if self.seeds.is_empty() {
-            return Err(invalid("seeds", "expected at least one seed".into()));
+        if !SEEDS.contains(self.seeds.len()) {
+            return Err(invalid("seeds", format!("expected {}, got {}", SEEDS.expected, self.seeds.len())));
         }
         if let Some(seed) =
             self.seeds.iter().enumerate().find_map(|(i, s)| self.seeds[..i].contains(s).then_some(s))

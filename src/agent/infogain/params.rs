@@ -84,8 +84,8 @@ impl StepParams for InfogainParams {
         )?;
         expect_param((1..=3).contains(&self.horizon_steps), "horizon_steps", "1, 2 or 3 agent steps")?;
         expect_param(self.hypotheses > 0, "hypotheses", "at least 1 imagined pose")?;
-        expect_param(self.particles > 0, "particles", "at least 1 particle")?;
-        expect_param(self.beams > 0, "beams", "at least 1 ray per imagined scan")?;
+        crate::limits::PARTICLES.check("particles", self.particles)?;
+        crate::limits::BEAMS.check("beams", self.beams)?;
         expect_param(
             self.likelihood_scale > 0.0 && self.likelihood_scale <= 1.0,
             "likelihood_scale",

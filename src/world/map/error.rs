@@ -21,15 +21,30 @@ pub enum MapError {
 
     /// A required field is absent from the map YAML.
     #[error("map YAML {path} has no `{field}` field; expected {expected}")]
-    MissingField { path: PathBuf, field: &'static str, expected: &'static str },
+    MissingField { path: PathBuf, field: &'static str, expected: String },
 
     /// A field is present but its value is unusable.
     #[error("map YAML {path}: field `{field}` is {found}; expected {expected}")]
-    InvalidField { path: PathBuf, field: &'static str, expected: &'static str, found: String },
+    InvalidField { path: PathBuf, field: &'static str, expected: String, found: String },
 
     /// The image named by the YAML's `image` field does not exist.
     #[error("map image {image} (named by `image` in {yaml}) does not exist")]
     ImageMissing { yaml: PathBuf, image: PathBuf },
+
+    /// The image's header asks for more pixels, or a larger map, than `crate::limits` allows;
+    /// checked before the pixels are decoded.
+    #[error(
+        "map image {path} is {width} × {height} pixels ({width_m} × {height_m} m at {resolution_m} m per pixel); expected {expected}"
+    )]
+    ImageTooLarge {
+        path: PathBuf,
+        width: u32,
+        height: u32,
+        resolution_m: f32,
+        width_m: f32,
+        height_m: f32,
+        expected: String,
+    },
 
     /// The image exists but cannot be opened or decoded as PGM/PNG.
     #[error("map image {path} cannot be decoded (expected an 8-bit PGM or PNG): {reason}")]

@@ -10,6 +10,7 @@
 //! trinary and scale mode. Image row 0 is the top of the map; `origin` is the pose of the
 //! bottom-left pixel, yaw included.
 
+use crate::limits::{MAP_ORIGIN_M, MAP_PIXELS, MAP_RESOLUTION_M, MAP_SIDE_M, MAP_SIDE_PX, thousands};
 use crate::world::map::error::MapError;
 use crate::world::map::occupancy::{Cell, OccupancyMap};
 use crate::world::pose::Pose2;
@@ -60,11 +61,13 @@ pub fn load_ros_map(yaml_path: &Path) -> Result<OccupancyMap, MapError> {
         path: meta.image.clone(),
         reason: e.to_string(),
     };
-    let img = image::ImageReader::open(&meta.image)
-        .and_then(|r| r.with_guessed_format())
-        .map_err(|e| unreadable(&e))?
-        .decode()
-        .map_err(|e| unreadable(&e))?;
+    let open = || image::ImageReader::open(&meta.image).and_then(|r| r.with_guessed_format());
+    let (width, height) =
+        open().map_err(|e| unreadable(&e))?.into_dimensions().map_err(|e| unreadable(&e))?;
+    check_image_size(&meta, width, height)?;
+    let mut reader = open().map_err(|e| unreadable(&e))?;
+    reader.limits(decoder_limits());
+    let img = reader.decode().map_err(|e| unreadable(&e))?;
     let map = occupancy_from_image(&img, &meta);
     if map.counts().0 == 0 {
         return Err(MapError::NoFreeSpace { path: yaml_path.to_path_buf() });
@@ -72,11 +75,53 @@ pub fn load_ros_map(yaml_path: &Path) -> Result<OccupancyMap, MapError> {
     Ok(map)
 }
 
+/// Fails unless a `width × height` image at the YAML's resolution fits the map limits of
+/// [`crate::limits`]; only the image header has been read so far.
+fn check_image_size(meta: &RosMapYaml, width: u32, height: u32) -> Result<(), MapError> {
+    let (w, h) = (u64::from(width), u64::from(height));
+    let side_m = |px: u64| px as f64 * f64::from(meta.resolution_m);
+    let fits =
+        w > 0 && h > 0 && w.max(h) <= MAP_SIDE_PX && w * h <= MAP_PIXELS && side_m(w.max(h)) <= MAP_SIDE_M;
+    if fits {
+        return Ok(());
+    }
+    Err(MapError::ImageTooLarge {
+        path: meta.image.clone(),
+        width,
+        height,
+        resolution_m: meta.resolution_m,
+        width_m: side_m(w) as f32,
+        height_m: side_m(h) as f32,
+        expected: format!(
+            "1 to {} pixels per side, at most {} pixels, and at most {} m per side",
+            thousands(MAP_SIDE_PX),
+            thousands(MAP_PIXELS),
+            thousands(MAP_SIDE_M as u64)
+        ),
+    })
+}
+
+/// The decoder's own ceiling, for what a header cannot tell (e.g. PNG text chunks): the largest
+/// allowed map as 4-channel pixels.
+fn decoder_limits() -> image::Limits {
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAP_SIDE_PX as u32);
+    limits.max_image_height = Some(MAP_SIDE_PX as u32);
+    limits.max_alloc = Some(MAP_PIXELS * 4 * 2);
+    limits
+}
+
 /// Reads and validates a map YAML without touching the image.
 pub fn read_ros_yaml(yaml_path: &Path) -> Result<RosMapYaml, MapError> {
     let path = yaml_path.to_path_buf();
     let text = std::fs::read_to_string(yaml_path)
         .map_err(|source| MapError::YamlUnreadable { path: path.clone(), source })?;
+    if let Some((line, column)) = too_deep(&text) {
+        let message = format!(
+            "brackets nested deeper than {MAX_YAML_NESTING} levels; expected flat `key: value` lines (the deepest is `origin: [x, y, yaw]`)"
+        );
+        return Err(MapError::YamlParse { path, line, column, message });
+    }
     let value: Value = serde_norway::from_str(&text).map_err(|e| {
         let (line, column) = e.location().map_or((0, 0), |l| (l.line(), l.column()));
         MapError::YamlParse { path: path.clone(), line, column, message: e.to_string() }
@@ -96,7 +141,11 @@ pub fn read_ros_yaml(yaml_path: &Path) -> Result<RosMapYaml, MapError> {
         image_name.as_str().ok_or_else(|| fields.invalid("image", "a path string", image_name))?;
     let image = yaml_path.parent().unwrap_or(Path::new("")).join(image_name);
 
-    let resolution_m = fields.number("resolution", "a positive number of metres per pixel", |r| r > 0.0)?;
+    let (min_res, max_res) = MAP_RESOLUTION_M;
+    let resolution_m =
+        fields.number("resolution", &format!("metres per pixel in [{min_res}, {max_res}]"), |r| {
+            (min_res..=max_res).contains(&r)
+        })?;
     let origin = fields.origin()?;
     let negate = fields.negate()?;
     let in_unit = |t: f64| (0.0..=1.0).contains(&t);
@@ -122,6 +171,28 @@ pub fn read_ros_yaml(yaml_path: &Path) -> Result<RosMapYaml, MapError> {
     })
 }
 
+/// Deepest `[`/`{` nesting read as a map YAML: the YAML scanner takes seconds on tens of
+/// thousands of nested brackets before its own recursion limit applies.
+const MAX_YAML_NESTING: usize = 16;
+
+/// The 1-based line and column where brackets nest deeper than [`MAX_YAML_NESTING`], if they do.
+fn too_deep(text: &str) -> Option<(usize, usize)> {
+    let mut depth = 0usize;
+    for (row, line) in text.lines().enumerate() {
+        for (col, c) in line.chars().enumerate() {
+            match c {
+                '[' | '{' => depth += 1,
+                ']' | '}' => depth = depth.saturating_sub(1),
+                _ => {}
+            }
+            if depth > MAX_YAML_NESTING {
+                return Some((row + 1, col + 1));
+            }
+        }
+    }
+    None
+}
+
 /// Field access with errors that name the file and the field.
 struct Fields<'a> {
     path: &'a Path,
@@ -129,19 +200,23 @@ struct Fields<'a> {
 }
 
 impl Fields<'_> {
-    fn require(&self, field: &'static str, expected: &'static str) -> Result<&Value, MapError> {
-        self.doc.get(field).ok_or_else(|| MapError::MissingField { path: self.path.into(), field, expected })
+    fn require(&self, field: &'static str, expected: &str) -> Result<&Value, MapError> {
+        self.doc.get(field).ok_or_else(|| MapError::MissingField {
+            path: self.path.into(),
+            field,
+            expected: expected.into(),
+        })
     }
 
-    fn invalid(&self, field: &'static str, expected: &'static str, found: &Value) -> MapError {
+    fn invalid(&self, field: &'static str, expected: &str, found: &Value) -> MapError {
         let found = serde_norway::to_string(found).map_or_else(|_| format!("{found:?}"), |s| s.trim().into());
-        MapError::InvalidField { path: self.path.into(), field, expected, found }
+        MapError::InvalidField { path: self.path.into(), field, expected: expected.into(), found }
     }
 
     fn number(
         &self,
         field: &'static str,
-        expected: &'static str,
+        expected: &str,
         valid: impl Fn(f64) -> bool,
     ) -> Result<f64, MapError> {
         let v = self.require(field, expected)?;
@@ -149,13 +224,18 @@ impl Fields<'_> {
     }
 
     fn origin(&self) -> Result<Pose2, MapError> {
-        const EXPECTED: &str = "a list [x, y, yaw] of three finite numbers (metres, metres, radians)";
-        let v = self.require("origin", EXPECTED)?;
+        let expected = format!(
+            "a list [x, y, yaw] of three finite numbers (metres, metres, radians), |x| and |y| ≤ {} m",
+            thousands(MAP_ORIGIN_M as u64)
+        );
+        let v = self.require("origin", &expected)?;
         let xs: Option<Vec<f64>> =
             v.as_sequence().and_then(|s| s.iter().map(|e| e.as_f64().filter(|x| x.is_finite())).collect());
         match xs.as_deref() {
-            Some(&[x, y, yaw]) => Ok(Pose2::new(x as f32, y as f32, yaw as f32)),
-            _ => Err(self.invalid("origin", EXPECTED, v)),
+            Some(&[x, y, yaw]) if x.abs().max(y.abs()) <= MAP_ORIGIN_M => {
+                Ok(Pose2::new(x as f32, y as f32, yaw as f32))
+            }
+            _ => Err(self.invalid("origin", &expected, v)),
         }
     }
 
@@ -357,6 +437,64 @@ mod tests {
         assert_eq!(map.get(1, 0), Cell::Free);
     }
 
+    /// A map YAML with `resolution` beside an image written as `image` bytes; the load error.
+    fn load_error(resolution: &str, image: &[u8]) -> (String, PathBuf) {
+        let dir = tempfile::tempdir().expect("temp dir");
+        std::fs::write(dir.path().join("m.pgm"), image).expect("write image");
+        let yaml = dir.path().join("m.yaml");
+        let text = format!(
+            "image: m.pgm\nresolution: {resolution}\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.2\n"
+        );
+        std::fs::write(&yaml, text).expect("write yaml");
+        (load_ros_map(&yaml).expect_err("out of range").to_string(), yaml)
+    }
+
+    #[test]
+    fn resolutions_outside_the_sane_range_are_rejected() {
+        let pgm = b"P2\n2 1\n255\n254 254\n";
+        for given in ["0.00001", "100"] {
+            let (e, yaml) = load_error(given, pgm);
+            let want = format!(
+                "map YAML {}: field `resolution` is {given}; expected metres per pixel in [0.005, 0.5]",
+                yaml.display()
+            );
+            assert_eq!(e, want, "resolution {given}");
+        }
+    }
+
+    #[test]
+    fn deeply_nested_yaml_is_refused_before_the_parser_runs() {
+        // Found by `apfn fuzz --target map`: 35,000 `{` after `negate:` took 2.3 s of CPU to parse.
+        let dir = tempfile::tempdir().expect("temp dir");
+        let yaml = dir.path().join("deep.yaml");
+        std::fs::write(&yaml, format!("image: m.pgm\nnegate: {}\n", "{".repeat(35_000))).expect("write");
+        let e = read_ros_yaml(&yaml).expect_err("nested too deep").to_string();
+        let want = format!(
+            "map YAML {} is not valid YAML at line 2, column 25: brackets nested deeper than 16 levels; \
+             expected flat `key: value` lines (the deepest is `origin: [x, y, yaw]`)",
+            yaml.display()
+        );
+        assert_eq!(e, want);
+    }
+
+    #[test]
+    fn image_sizes_are_checked_from_the_header_before_decoding() {
+        // Headers only: decoding any of them would fail (no pixels) or allocate gigabytes.
+        let too_many = load_error("0.05", b"P5\n20000 20000\n255\n").0;
+        assert!(
+            too_many.contains("is 20000 × 20000 pixels (1000 × 1000 m at 0.05 m per pixel)"),
+            "{too_many}"
+        );
+        assert!(too_many.ends_with("expected 1 to 10,000 pixels per side, at most 25,000,000 pixels, and at most 1,000 m per side"), "{too_many}");
+        let too_wide = load_error("0.5", b"P5\n4000 10\n255\n").0;
+        assert!(too_wide.contains("(2000 × 5 m at 0.5 m per pixel)"), "a map wider than 1 km: {too_wide}");
+        let fits = load_error("0.05", b"P5\n2000 2000\n255\n").0;
+        assert!(
+            fits.contains("cannot be decoded"),
+            "within limits, the decoder runs (and finds no pixels): {fits}"
+        );
+    }
+
     #[test]
     fn invalid_fields_are_named() {
         let dir = tempfile::tempdir().expect("temp dir");
@@ -365,6 +503,7 @@ mod tests {
         let cases = [
             ("resolution: 0.1", "resolution: -1", "resolution"),
             ("origin: [0, 0, 0]", "origin: [0, 0]", "origin"),
+            ("origin: [0, 0, 0]", "origin: [1e9, 0, 0]", "origin"),
             ("negate: 0", "negate: 2", "negate"),
             ("free_thresh: 0.2", "free_thresh: 1.5", "free_thresh"),
             ("occupied_thresh: 0.65", "occupied_thresh: high", "occupied_thresh"),

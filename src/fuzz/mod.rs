@@ -1,0 +1,12 @@
+//! Fuzzing the loaders on stable Rust: every kind of file a user hands apfn (map YAML + image,
+//! scene, schedule, eval, sweep, replay log) is mutated from valid files and loaded as the CLI
+//! loads it, with panics caught and every input timed. `apfn fuzz` runs it; `tests/fuzz.rs` is
+//! its smoke test.
+
+mod mutate;
+mod run;
+mod targets;
+
+pub use mutate::{corpus_words, mutate};
+pub use run::{FuzzOptions, HANG_FACTOR, TargetReport, fuzz_target};
+pub use targets::{Sample, TARGETS, Target, target};
