@@ -1,6 +1,7 @@
-//! `apfn localize`: runs the classical particle filter (likelihood-field MCL) on a recorded JSON
-//! Lines log or ROS 2 bag and a ROS map, writing one estimate per scan — how users localize their
-//! own robot's data, and how apfn is compared with other localizers on identical input.
+//! `apfn localize`: runs the classical particle filter (MCL with the likelihood-field or the beam
+//! model) on a recorded JSON Lines log or ROS 2 bag and a ROS map, writing one estimate per scan —
+//! how users localize their own robot's data, and how apfn is compared with other localizers on
+//! identical input.
 //!
 //! Start: tracking and semi-global draw around `--init` when given (used as it is), else around
 //! the first line's `truth` perturbed as the task prescribes; global needs neither. Every input
@@ -12,8 +13,8 @@ use crate::cli::count;
 use crate::particles::{InitParams, KldParams, ResampleParams, Task};
 use crate::replay::bag::{BagLog, BagTopics, read_bag};
 use crate::replay::{
-    EstimateLine, FIT_TOLERANCE_M, InitialGuess, Localizer, LocalizerParams, LogLine, MIN_FIT, read_log,
-    to_jsonl,
+    EstimateLine, FIT_TOLERANCE_M, InitialGuess, Localizer, LocalizerParams, LogLine, MIN_FIT, ReplayModel,
+    read_log, to_jsonl,
 };
 use crate::world::map::{load_ros_map, write_atomically};
 use crate::world::{Pose2, angle_error, wrap_angle};
@@ -52,6 +53,9 @@ pub struct LocalizeArgs {
     /// Initial guess `x,y,θ` (metres, metres, radians) for tracking and semi_global.
     #[arg(long, value_parser = parse_pose, allow_hyphen_values = true, value_name = "X,Y,THETA")]
     pub init: Option<Pose2>,
+    /// Observation model: likelihood_field (AMCL's default) or beam (ray casts, slower).
+    #[arg(long, value_enum, default_value = "likelihood_field")]
+    pub model: ReplayModel,
     /// Seed of the filter's random streams; the same seed gives the same estimates.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -244,6 +248,7 @@ pub fn localizer_params(args: &LocalizeArgs) -> anyhow::Result<LocalizerParams> 
     let particles = args.particles.or(kld.as_ref().map(|k| k.max_particles));
     let params = LocalizerParams {
         init: InitParams { task: args.task, particles, ..defaults.init },
+        model: args.model,
         resample: ResampleParams {
             alpha: args.alpha.unwrap_or(defaults.resample.alpha),
             kld,

@@ -1,8 +1,9 @@
-//! `apfn map …`: inspect a ROS map, render a map to PNG, export procedural apartments as ROS maps.
+//! `apfn map …`: inspect a ROS map, render a map to PNG, export procedural apartments as ROS maps,
+//! resample a map to a coarser resolution.
 
 use crate::world::RobotParams;
 use crate::world::map::procedural::{ApartmentParams, generate_apartment};
-use crate::world::map::{TraversableMap, load_ros_map, render, save_ros_map, write_atomically};
+use crate::world::map::{CoarsenRule, TraversableMap, load_ros_map, render, save_ros_map, write_atomically};
 use anyhow::{Context, bail, ensure};
 use image::ImageFormat;
 use std::io::Cursor;
@@ -36,6 +37,24 @@ pub enum MapCommand {
         #[arg(long)]
         procedural: u64,
         /// Folder to write into (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+        /// Cell size, metres (default: the generator's 0.05; older ROS maps are 0.1).
+        #[arg(long)]
+        resolution: Option<f32>,
+    },
+    /// Write a ROS map at a coarser resolution, unknown areas kept, as `<out>` and the PGM beside it.
+    Resample {
+        /// The map's YAML file (ROS map_server format).
+        path: PathBuf,
+        /// The new cell size, metres (at least the map's own).
+        #[arg(long)]
+        resolution: f32,
+        /// keep_walls: as a mapper at that resolution would draw it; average_image: as shrinking the
+        /// PGM and reading it back would (thin walls beside unknown space become unknown).
+        #[arg(long, value_enum, default_value = "keep_walls")]
+        rule: CoarsenRule,
+        /// The YAML file to write (its folder is created if missing).
         #[arg(long)]
         out: PathBuf,
     },
@@ -74,12 +93,30 @@ pub fn run(cmd: MapCommand) -> anyhow::Result<()> {
                 map.resolution_m
             );
         }
-        MapCommand::Export { procedural, out } => {
-            let map = generate_apartment(procedural, &ApartmentParams::default());
+        MapCommand::Export { procedural, out, resolution } => {
+            let defaults = ApartmentParams::default();
+            let params =
+                ApartmentParams { resolution_m: resolution.unwrap_or(defaults.resolution_m), ..defaults };
+            params.validate().map_err(|e| anyhow::anyhow!("--resolution: {e}"))?;
+            let map = generate_apartment(procedural, &params);
             std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
             let yaml = out.join(format!("apartment_{procedural}.yaml"));
             save_ros_map(&map, &yaml)?;
             println!("wrote {} and {}", yaml.display(), yaml.with_extension("pgm").display());
+        }
+        MapCommand::Resample { path, resolution, rule, out } => {
+            let map = load_ros_map(&path)?;
+            ensure!(
+                resolution.is_finite() && resolution >= map.resolution_m,
+                "--resolution {resolution}: expected a cell size ≥ the map's {} m ({})",
+                map.resolution_m,
+                path.display()
+            );
+            if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+                std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+            }
+            save_ros_map(&map.coarsened(resolution, rule), &out)?;
+            println!("wrote {} and {}", out.display(), out.with_extension("pgm").display());
         }
     }
     Ok(())
@@ -134,7 +171,7 @@ mod tests {
             Cli::try_parse_from(["apfn", "render", "--procedural", "3", "--out", "a.png"]).expect("parses");
         assert_eq!(cli.cmd, MapCommand::Render { path: None, procedural: Some(3), out: "a.png".into() });
         let cli = Cli::try_parse_from(["apfn", "export", "--procedural", "9", "--out", "d"]).expect("parses");
-        assert_eq!(cli.cmd, MapCommand::Export { procedural: 9, out: "d".into() });
+        assert_eq!(cli.cmd, MapCommand::Export { procedural: 9, out: "d".into(), resolution: None });
         assert!(Cli::try_parse_from(["apfn", "export", "--out", "d"]).is_err(), "export needs a seed");
     }
 
@@ -175,6 +212,37 @@ mod tests {
             run(MapCommand::Render { path: None, procedural: Some(1), out: jpg.clone() }).expect_err(".jpg");
         assert!(err.to_string().contains("ending in .png"), "{err}");
         assert!(!jpg.exists(), "nothing is written under a name that promises another format");
+    }
+
+    #[test]
+    fn resample_writes_a_coarser_map_and_refuses_a_finer_one() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let mut room = tiny_room();
+        room.set(1, 13, Cell::Unknown);
+        let yaml = dir.path().join("room.yaml");
+        save_ros_map(&room, &yaml).expect("save");
+        let rule = CoarsenRule::AverageImage;
+        let out = dir.path().join("coarse/room.yaml");
+        run(MapCommand::Resample { path: yaml.clone(), resolution: 0.2, rule, out: out.clone() })
+            .expect("resample");
+        let coarse = load_ros_map(&out).expect("the resampled map loads");
+        assert_eq!(coarse, room.coarsened(0.2, rule), "written as coarsened, origin and cells");
+        let err = run(MapCommand::Resample { path: yaml, resolution: 0.05, rule, out })
+            .expect_err("finer than the map");
+        assert!(err.to_string().contains("≥ the map's 0.1 m"), "{err}");
+    }
+
+    #[test]
+    fn export_at_a_coarser_resolution() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        run(MapCommand::Export { procedural: 4, out: dir.path().into(), resolution: Some(0.1) })
+            .expect("export");
+        let map = load_ros_map(&dir.path().join("apartment_4.yaml")).expect("loads");
+        assert_eq!(map.resolution_m, 0.1);
+        assert!(map.counts().2 > 0, "unknown beyond the outer walls is kept");
+        let err = run(MapCommand::Export { procedural: 4, out: dir.path().into(), resolution: Some(0.9) })
+            .expect_err("out of the generator's range");
+        assert!(err.to_string().contains("--resolution"), "{err}");
     }
 
     #[test]

@@ -1,7 +1,10 @@
 //! AMCL's likelihood-field observation model (Thrun et al., Probabilistic Robotics §6.4; nav2
 //! `nav2_amcl` `likelihood_field`): each used beam's endpoint, projected from a particle, costs
-//! one lookup of the distance to the nearest obstacle, d, and scores
-//! p = z_hit·exp(−d²/2σ²) + z_rand/range_max.
+//! one look-up of the distance to the nearest surface where rays end, d, and scores
+//! p = z_hit·exp(−d²/2σ²) + z_rand/range_max. Unlike AMCL, the borders of unknown areas count as
+//! such surfaces (rays stop there, in nav2's beam model as in our LiDAR), and d is interpolated
+//! between cell centres and measured to the cell's face ([`DistanceField::surface_distance`]):
+//! both matter on 0.1 m maps (`docs/results/coarse_maps.md`).
 //!
 //! Accumulation ([`BeamCombination`]): by default we add Σ log p to the particle's log-weight — the
 //! model's actual likelihood under independent beams. AMCL instead multiplies the weight by
@@ -182,10 +185,10 @@ pub fn add_log_likelihoods(
     params: &LikelihoodFieldParams,
 ) -> Result<(), ParticleError> {
     let cells = field.width * field.height;
-    let Some(dist) = field.distances_m.get(..cells) else {
+    if field.distances_m.len() < cells {
         let found = field.distances_m.len();
         return Err(ParticleError::MalformedLayer { layer: "DistanceField", expected: cells, found });
-    };
+    }
     let inv_res = 1.0 / field.resolution_m;
     let beams = beam_offsets(scan, params.max_beams, field.resolution_m);
     let table = beam_term_table(params, scan.range_max_m)?;
@@ -196,7 +199,7 @@ pub fn add_log_likelihoods(
     let far = table[LOG_P_TABLE_LEN - 1];
     let scale = (LOG_P_TABLE_LEN - 1) as f32 / params.laser_likelihood_max_dist.max(1e-6);
     let max_dist = params.laser_likelihood_max_dist;
-    let (w, wf, hf) = (field.width, field.width as f32, field.height as f32);
+    let (wf, hf) = (field.width as f32, field.height as f32);
     let (so, co) = origin.yaw.sin_cos();
     let ParticleSet { x, y, yaw, log_w } = set;
     let chunks = log_w.par_chunks_mut(LIKELIHOOD_CHUNK).zip(x.par_chunks(LIKELIHOOD_CHUNK));
@@ -217,7 +220,7 @@ pub fn add_log_likelihoods(
                 let gy = gy0 + s * bx + c * by;
                 // `as i32` (not `as usize`): f32→u64 is a slow multi-instruction sequence on x86-64.
                 sum += if gx >= 0.0 && gy >= 0.0 && gx < wf && gy < hf {
-                    let d = dist[gy as i32 as usize * w + gx as i32 as usize].min(max_dist);
+                    let d = field.surface_distance(gx, gy, max_dist);
                     table[((d * scale + 0.5) as i32 as usize).min(LOG_P_TABLE_LEN - 1)]
                 } else {
                     far
@@ -265,11 +268,20 @@ mod tests {
     use crate::world::Cell;
     use bevy::ecs::system::RunSystemOnce;
 
-    /// Distance from each cell centre to the nearest non-free cell centre, by brute force.
+    /// Distance from each cell centre to the nearest centre of a cell where rays end (occupied, or
+    /// unknown beside a free cell), by brute force.
     fn brute_field(map: &OccupancyMap) -> DistanceField {
+        let free_beside = |i: usize, j: usize| {
+            (j.saturating_sub(1)..(j + 2).min(map.height))
+                .any(|b| (i.saturating_sub(1)..(i + 2).min(map.width)).any(|a| map.get(a, b) == Cell::Free))
+        };
         let blocked: Vec<(usize, usize)> = (0..map.height)
             .flat_map(|j| (0..map.width).map(move |i| (i, j)))
-            .filter(|&(i, j)| map.get(i, j) != Cell::Free)
+            .filter(|&(i, j)| match map.get(i, j) {
+                Cell::Occupied => true,
+                Cell::Unknown => free_beside(i, j),
+                Cell::Free => false,
+            })
             .collect();
         let distances_m = (0..map.height)
             .flat_map(|j| (0..map.width).map(move |i| (i, j)))
@@ -402,7 +414,7 @@ mod tests {
 
     #[test]
     fn likelihood_matches_reference_formula() {
-        // Reference: per beam, DistanceField::distance_at on the world endpoint and the exact
+        // Reference: per beam, DistanceField::surface_distance_at on the world endpoint and the exact
         // formula, on a map with a rotated origin; the kernel may differ only by its table step.
         let params = LikelihoodFieldParams { max_beams: 40, ..Default::default() };
         let mut map = tiny_room();
@@ -422,7 +434,7 @@ mod tests {
                 .map(|i| {
                     let r = scan.ranges_m[i];
                     let a = p.yaw + scan.angle_min_rad + i as f32 * scan.angle_increment_rad;
-                    let d = field.distance_at(&map, p.x + r * a.cos(), p.y + r * a.sin()).min(2.0);
+                    let d = field.surface_distance_at(&map, p.x + r * a.cos(), p.y + r * a.sin(), 2.0);
                     (0.5 * (-d * d / (2.0 * 0.04)).exp() + 0.5 / scan.range_max_m).ln()
                 })
                 .sum();
@@ -455,7 +467,7 @@ mod tests {
                 .map(|i| {
                     let (r, a) =
                         (scan.ranges_m[i], p.yaw + scan.angle_min_rad + i as f32 * scan.angle_increment_rad);
-                    let d = field.distance_at(&map, p.x + r * a.cos(), p.y + r * a.sin()).min(2.0);
+                    let d = field.surface_distance_at(&map, p.x + r * a.cos(), p.y + r * a.sin(), 2.0);
                     (0.5 * (-d * d / (2.0 * 0.04)).exp() + 0.5 / scan.range_max_m).powi(3)
                 })
                 .sum::<f32>()
@@ -468,6 +480,37 @@ mod tests {
         }
         assert!(cube[0] > cube[1], "the truth still scores higher");
         assert!(cube[0] - cube[1] < (product[0] - product[1]) / 10.0, "{cube:?} vs {product:?}: far flatter");
+    }
+
+    /// A 0.1 m room open to unknown space on three sides, as a coarse SLAM map whose thin walls
+    /// faded into unknown: only the left wall is occupied.
+    fn room_bounded_by_unknown() -> OccupancyMap {
+        let mut drawing = String::from("??????????????????????\n");
+        for _ in 0..14 {
+            drawing += "#..................???\n";
+        }
+        drawing += "??????????????????????\n";
+        OccupancyMap::from_ascii(0.1, &drawing)
+    }
+
+    #[test]
+    fn beams_ending_on_unknown_borders_are_hits() {
+        let map = room_bounded_by_unknown();
+        let truth = Pose2::new(1.03, 0.77, 0.4);
+        let scan = marched_scan(&map, truth);
+        let field = DistanceField::build(&map);
+        assert_eq!(field, brute_field(&map), "the tests' brute force and the field agree");
+        let params = LikelihoodFieldParams { max_beams: 228, ..Default::default() };
+        let mut set = ParticleSet::from_poses(&[truth]);
+        set.log_w = vec![0.0];
+        add_log_likelihoods(&mut set, &scan, &field, &map.origin, &params).expect("valid field");
+        let hits = scan.ranges_m.iter().filter(|&&r| r < scan.range_max_m).count() as f32;
+        let best = (0.5 + 0.5 / scan.range_max_m).ln() * hits;
+        assert!(
+            set.log_w[0] > best - 0.05 * hits,
+            "at the true pose every beam scores about as a hit: {} vs {best} for {hits} beams",
+            set.log_w[0]
+        );
     }
 
     #[test]

@@ -1,7 +1,7 @@
-//! The classical particle filter (likelihood-field MCL) on logged data, without the simulator:
-//! a plain struct that owns the map layers, the particle set and its RNG, and runs the same
-//! kernels as the ECS systems, in the same order — transition → likelihood field → soft
-//! resampling → estimate.
+//! The classical particle filter (MCL with the likelihood-field or the beam model) on logged data,
+//! without the simulator: a plain struct that owns the map layers, the particle set and its RNG,
+//! and runs the same kernels as the ECS systems, in the same order — transition → observation
+//! model → soft resampling → estimate.
 //!
 //! ```no_run
 //! use apfn::replay::{InitialGuess, Localizer, LocalizerParams};
@@ -21,14 +21,14 @@
 //! after. Same map, params, guess, seed and inputs → identical estimates, on any thread count.
 
 use crate::particles::{
-    FilterHealth, Guard, InitParams, LikelihoodFieldParams, ParticleSet, PoseEstimate, ResampleParams, Task,
-    TransitionParams, draw_around_guess, draw_initial_set, estimate_pose, propagate, resample_with,
-    should_resample, weigh_likelihood_field,
+    BeamModelParams, FilterHealth, Guard, InitParams, LikelihoodFieldParams, ParticleSet, PoseEstimate,
+    ResampleParams, Task, TransitionParams, draw_around_guess, draw_initial_set, estimate_pose, propagate,
+    resample_with, should_resample, weigh_beam_model, weigh_likelihood_field,
 };
 use crate::replay::error::ReplayError;
 use crate::replay::fit::scan_fit;
 use crate::replay::log::{EstimateLine, LogLine};
-use crate::sense::LidarScan;
+use crate::sense::{LidarScan, RayGrid};
 use crate::world::map::{DistanceField, TraversableMap};
 use crate::world::rng::stream;
 use crate::world::{OccupancyMap, Pose2, RobotParams};
@@ -45,8 +45,12 @@ pub struct LocalizerParams {
     pub init: InitParams,
     /// Motion noise added to every odometry delta.
     pub transition: TransitionParams,
-    /// AMCL's likelihood-field observation model.
+    /// Which observation model weighs the particles.
+    pub model: ReplayModel,
+    /// AMCL's likelihood-field observation model (used when `model` is `likelihood_field`).
     pub likelihood_field: LikelihoodFieldParams,
+    /// AMCL's beam model (used when `model` is `beam`).
+    pub beam_model: BeamModelParams,
     /// Soft resampling (α) and its ESS policy.
     pub resample: ResampleParams,
     /// Robot radius used to erode free space into the traversable map, metres (default: the
@@ -59,11 +63,26 @@ impl Default for LocalizerParams {
         Self {
             init: InitParams::default(),
             transition: TransitionParams::default(),
+            model: ReplayModel::default(),
             likelihood_field: LikelihoodFieldParams::default(),
+            beam_model: BeamModelParams::default(),
             resample: ResampleParams::default(),
             robot_radius_m: RobotParams::default().radius_m,
         }
     }
+}
+
+/// The observation models the replay filter offers, as nav2's AMCL does (`laser_model_type`).
+/// Spelled `likelihood_field` and `beam` in RON, JSON and on the command line.
+#[derive(Serialize, Deserialize, clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+#[value(rename_all = "snake_case")]
+pub enum ReplayModel {
+    /// One distance lookup per beam endpoint: fast, AMCL's default.
+    #[default]
+    LikelihoodField,
+    /// One ray cast per beam, scoring the measured range against the expected one.
+    Beam,
 }
 
 impl LocalizerParams {
@@ -103,6 +122,8 @@ pub enum InitialGuess {
 pub struct Localizer {
     map: OccupancyMap,
     field: DistanceField,
+    /// Built only for the beam model, which ray-casts through it.
+    rays: Option<RayGrid>,
     traversable: TraversableMap,
     set: ParticleSet,
     params: LocalizerParams,
@@ -128,6 +149,7 @@ impl Localizer {
         params.validate()?;
         let traversable = TraversableMap::build(&map, params.robot_radius_m)?;
         let field = DistanceField::build(&map);
+        let rays = (params.model == ReplayModel::Beam).then(|| RayGrid::from_map(&map));
         let mut rng = stream(&[seed]);
         let task = params.init.task;
         let drawn = match (task, init) {
@@ -146,6 +168,7 @@ impl Localizer {
         Ok(Self {
             map,
             field,
+            rays,
             traversable,
             set,
             params,
@@ -167,14 +190,21 @@ impl Localizer {
     }
 
     /// The observation half of a step, without motion (for the first scan): weighs the particles
-    /// by the likelihood field (NaN, ±∞, below-min and max-range beams are skipped), resamples
-    /// when the ESS policy fires, and returns the new estimate.
+    /// by the chosen model (each skips or maps unusable readings its own way), resamples when the
+    /// ESS policy fires, and returns the new estimate.
     pub fn observe(&mut self, scan: &LidarScan) -> PoseEstimate {
-        let lf = &self.params.likelihood_field;
-        match weigh_likelihood_field(&mut self.set, scan, &self.field, &self.map.origin, lf) {
+        let weighed = match &self.rays {
+            Some(rays) => weigh_beam_model(&mut self.set, scan, rays, &self.params.beam_model),
+            None => {
+                let lf = &self.params.likelihood_field;
+                weigh_likelihood_field(&mut self.set, scan, &self.field, &self.map.origin, lf)
+            }
+        };
+        match weighed {
             Ok((Guard::ResetToUniform, _)) => self.health.degeneracies += 1,
             Ok(_) => {}
-            // The field is built from the map in `new`, so it always has width × height cells.
+            // The layers are built from the map in `new`; what remains is a scan with a bad
+            // range_max, which the beam model refuses.
             Err(e) => tracing::warn!("replay localizer: {e}"),
         }
         if should_resample(&self.set, self.params.resample.ess_threshold) {
@@ -279,19 +309,22 @@ mod tests {
     }
 
     #[test]
-    fn localizer_observe_pulls_towards_the_scan_pose() {
+    fn localizer_observe_pulls_towards_the_scan_pose_with_either_model() {
         let map = tiny_room();
         let truth = Pose2::new(0.6, 0.6, 0.3);
         let start = InitialGuess::Pose(Pose2::new(0.75, 0.5, 0.3));
-        let mut filter = Localizer::new(map.clone(), small_radius(), start, 2).expect("filter");
-        let before = filter.estimate().pose.distance(&truth);
-        let scan = scan_at(&map, truth);
-        let mut estimate = filter.observe(&scan);
-        for _ in 0..5 {
-            estimate = filter.update(Pose2::default(), &scan);
+        for model in [ReplayModel::LikelihoodField, ReplayModel::Beam] {
+            let params = LocalizerParams { model, ..small_radius() };
+            let mut filter = Localizer::new(map.clone(), params, start, 2).expect("filter");
+            let before = filter.estimate().pose.distance(&truth);
+            let scan = scan_at(&map, truth);
+            let mut estimate = filter.observe(&scan);
+            for _ in 0..5 {
+                estimate = filter.update(Pose2::default(), &scan);
+            }
+            let after = estimate.pose.distance(&truth);
+            assert!(after < 0.1 && after < before, "{model:?}: error {before} m → {after} m after six scans");
         }
-        let after = estimate.pose.distance(&truth);
-        assert!(after < 0.1 && after < before, "error {before} m → {after} m after six scans");
     }
 
     #[test]

@@ -12,5 +12,5 @@ mod log;
 
 pub use error::ReplayError;
 pub use fit::{FIT_TOLERANCE_M, MIN_FIT, scan_fit};
-pub use localizer::{InitialGuess, Localizer, LocalizerParams};
+pub use localizer::{InitialGuess, Localizer, LocalizerParams, ReplayModel};
 pub use log::{EstimateLine, LogLine, parse_line, parse_log, read_log, to_jsonl};

@@ -35,7 +35,8 @@ pub struct TraversableMap {
     pub cells: Vec<(u32, u32)>,
 }
 
-/// Distance from each fine cell's centre to the nearest occupied cell's centre, metres.
+/// Distance from each fine cell's centre to the nearest cell a LiDAR ray can end at (see
+/// [`DistanceField::build`]), metres.
 #[derive(Component, Clone, Debug, PartialEq)]
 pub struct DistanceField {
     pub width: usize,
@@ -235,10 +236,27 @@ impl DistanceField {
     /// users clip with their own `max_occ_dist` (AMCL: 2 m).
     pub const FAR_M: f32 = 1.0e6;
 
-    /// Exact Euclidean distance from each cell centre to the nearest Occupied cell centre (unknown
-    /// cells are not obstacles here, as in AMCL's likelihood field), metres.
+    /// Exact Euclidean distance from each cell centre to the nearest centre of a cell where rays
+    /// end, metres: every occupied cell, and every unknown cell next to (8-neighbourhood) a free
+    /// one. Unknown cells stop rays (nav2's beam model and our LiDAR), so a beam that ends on the
+    /// border of an unexplored area is a hit there; counting only occupied cells, as AMCL's
+    /// likelihood field does, scores such beams as far from anything and pulls the filter towards
+    /// poses that put them near some wall (on 0.1 m maps whose thin walls faded into unknown,
+    /// 6 of 10 tracking runs ended above 10 cm, `docs/results/coarse_maps.md`). Unknown cells
+    /// deep inside an unknown area are no ray's end, and stay at their distance from its border.
     pub fn build(map: &OccupancyMap) -> DistanceField {
-        let d2 = squared_edt(map.width, map.height, |k| map.cells[k] == Cell::Occupied);
+        let (w, h) = (map.width, map.height);
+        let borders_free = |k: usize| {
+            let (i, j) = (k % w, k / w);
+            let mut around = (j.saturating_sub(1)..(j + 2).min(h))
+                .flat_map(|nj| (i.saturating_sub(1)..(i + 2).min(w)).map(move |ni| nj * w + ni));
+            around.any(|n| map.cells[n] == Cell::Free)
+        };
+        let d2 = squared_edt(w, h, |k| match map.cells[k] {
+            Cell::Occupied => true,
+            Cell::Unknown => borders_free(k),
+            Cell::Free => false,
+        });
         let distances_m = d2
             .iter()
             .map(|&d| if d.is_finite() { d.sqrt() * map.resolution_m } else { Self::FAR_M })
@@ -249,6 +267,32 @@ impl DistanceField {
     /// Distance stored for the cell containing world point (x, y); [`Self::FAR_M`] off the map.
     pub fn distance_at(&self, map: &OccupancyMap, x: f32, y: f32) -> f32 {
         map.cell_at(x, y).map_or(Self::FAR_M, |(i, j)| self.distances_m[j * self.width + i])
+    }
+
+    /// Distance from a point to the nearest surface where rays end, metres, at continuous grid
+    /// coordinates (cells from the origin corner; callers keep the point on the grid): the
+    /// centre distances interpolated bilinearly, less half a cell (a ray ends on the face of the
+    /// cell it meets, half a cell before that cell's centre), never below 0. Reading the
+    /// containing cell's value instead scores an endpoint on a wall's face as 0 or one whole
+    /// cell away depending on rounding, which biased tracking on 0.1 m maps by ≈ 4 cm.
+    /// Distances beyond `max_m` are clamped to it first, so that [`Self::FAR_M`] never blends in.
+    #[inline]
+    pub fn surface_distance(&self, gx: f32, gy: f32, max_m: f32) -> f32 {
+        // Cell centres sit at +0.5: the four around the point are (i, j) … (i + 1, j + 1).
+        let (fx, fy) = ((gx - 0.5).max(0.0), (gy - 0.5).max(0.0));
+        let (i, j) = (fx as i32 as usize, fy as i32 as usize);
+        let (tx, ty) = (fx - i as f32, fy - j as f32);
+        let (i1, j1) = ((i + 1).min(self.width - 1), (j + 1).min(self.height - 1));
+        let d = |i: usize, j: usize| self.distances_m[j * self.width + i].min(max_m);
+        let (bottom, top) = (d(i, j) + (d(i1, j) - d(i, j)) * tx, d(i, j1) + (d(i1, j1) - d(i, j1)) * tx);
+        (bottom + (top - bottom) * ty - 0.5 * self.resolution_m).max(0.0)
+    }
+
+    /// [`Self::surface_distance`] at a world point; `max_m` off the map.
+    pub fn surface_distance_at(&self, map: &OccupancyMap, x: f32, y: f32, max_m: f32) -> f32 {
+        let (gx, gy) = map.world_to_grid(x, y);
+        let on_map = gx >= 0.0 && gy >= 0.0 && gx < self.width as f32 && gy < self.height as f32;
+        if on_map { self.surface_distance(gx, gy, max_m) } else { max_m }
     }
 }
 
@@ -284,13 +328,43 @@ mod tests {
         let field = DistanceField::build(&map);
         let at = |i: usize, j: usize| field.distances_m[j * 5 + i];
         assert_eq!(at(1, 1), 0.0, "occupied cell is at distance 0");
-        assert!((at(4, 3) - 0.1 * 13f32.sqrt()).abs() < 1e-6, "(3, 2) cells away: got {}", at(4, 3));
-        assert!((at(4, 2) - 0.1 * 10f32.sqrt()).abs() < 1e-6, "unknown cells are not obstacles");
-        let (x, y) = map.cell_center(3, 1);
-        assert!((field.distance_at(&map, x, y) - 0.2).abs() < 1e-6);
+        assert_eq!(at(4, 2), 0.0, "an unknown cell beside free space ends rays");
+        assert!((at(4, 4) - 0.2).abs() < 1e-6, "two cells above that unknown cell: got {}", at(4, 4));
+        assert!((at(0, 4) - 0.1 * 10f32.sqrt()).abs() < 1e-6, "(1, 3) cells from the wall: got {}", at(0, 4));
+        let (x, y) = map.cell_center(2, 1);
+        assert!((field.distance_at(&map, x, y) - 0.1).abs() < 1e-6);
         assert_eq!(field.distance_at(&map, -1.0, 0.2), DistanceField::FAR_M, "off-map is far");
         let empty = DistanceField::build(&OccupancyMap::filled(3, 2, 0.1, Cell::Free));
         assert!(empty.distances_m.iter().all(|&d| d == DistanceField::FAR_M), "no obstacle: all far");
+    }
+
+    #[test]
+    fn distance_field_ignores_unknown_cells_no_ray_reaches() {
+        let map = OccupancyMap::from_ascii(
+            0.1,
+            "
+            ?????
+            ?????
+            .....
+            ",
+        );
+        let field = DistanceField::build(&map);
+        let at = |i: usize, j: usize| field.distances_m[j * 5 + i];
+        assert_eq!(at(2, 1), 0.0, "the unknown border row ends rays");
+        assert!((at(2, 2) - 0.1).abs() < 1e-6, "the row behind it is one cell from the border: {}", at(2, 2));
+    }
+
+    #[test]
+    fn surface_distance_is_zero_on_a_face_and_grows_across_free_space() {
+        let map = OccupancyMap::from_ascii(0.1, "#......\n#......");
+        let field = DistanceField::build(&map);
+        for (gx, expected) in [(0.5, 0.0), (1.0, 0.0), (1.5, 0.05), (2.25, 0.125), (4.0, 0.3)] {
+            let d = field.surface_distance(gx, 1.0, 2.0);
+            assert!((d - expected).abs() < 1e-6, "at gx {gx}: {d} vs {expected}");
+        }
+        let clamped = field.surface_distance(6.9, 0.1, 0.4);
+        assert!((clamped - 0.35).abs() < 1e-6, "clamped before interpolating, less half a cell: {clamped}");
+        assert_eq!(field.surface_distance_at(&map, -0.1, 0.1, 2.0), 2.0, "off the map: the maximum");
     }
 
     #[test]
@@ -299,15 +373,29 @@ mod tests {
         let (w, h) = (23, 17);
         let mut map = OccupancyMap::filled(w, h, 0.05, Cell::Free);
         for c in &mut map.cells {
-            if rng.random::<f32>() < 0.04 {
-                *c = Cell::Occupied;
+            *c = match rng.random::<f32>() {
+                u if u < 0.04 => Cell::Occupied,
+                u if u < 0.3 => Cell::Unknown,
+                _ => Cell::Free,
+            };
+        }
+        for j in 8..13 {
+            for i in 5..12 {
+                map.set(i, j, Cell::Unknown); // an unknown area with an inside no ray reaches
             }
         }
         let field = DistanceField::build(&map);
+        let ends_rays = |s: usize| {
+            let (i, j) = (s % w, s / w);
+            let free_beside = (0..w * h)
+                .any(|n| map.cells[n] == Cell::Free && (n % w).abs_diff(i) <= 1 && (n / w).abs_diff(j) <= 1);
+            map.cells[s] == Cell::Occupied || (map.cells[s] == Cell::Unknown && free_beside)
+        };
+        assert!(field.distances_m[10 * w + 8] > 0.0, "the unknown area's inside is no obstacle");
         for k in 0..w * h {
             let (i, j) = ((k % w) as f32, (k / w) as f32);
             let brute = (0..w * h)
-                .filter(|&s| map.cells[s] == Cell::Occupied)
+                .filter(|&s| ends_rays(s))
                 .map(|s| ((s % w) as f32 - i).hypot((s / w) as f32 - j))
                 .fold(f32::INFINITY, f32::min)
                 * 0.05;

@@ -2,6 +2,7 @@
 //! (network map, traversable map, distance field) and an A* planner on the traversable map.
 
 mod astar;
+mod coarsen;
 mod edt;
 mod error;
 mod layers;
@@ -11,6 +12,7 @@ mod render;
 mod ros_io;
 
 pub use astar::{plan_cells, plan_path};
+pub use coarsen::CoarsenRule;
 pub use error::MapError;
 pub use layers::{DistanceField, NetworkMap, START_POSE_TRIES, TraversableMap};
 pub use occupancy::{Cell, OccupancyMap};

@@ -40,15 +40,15 @@ pub struct RosMapYaml {
 }
 
 /// Unknown level written by map_saver (p = 50/255 ≈ 0.196).
-const PGM_UNKNOWN: u8 = 205;
+pub(super) const PGM_UNKNOWN: u8 = 205;
 /// Free level written by map_saver.
-const PGM_FREE: u8 = 254;
+pub(super) const PGM_FREE: u8 = 254;
 /// Occupied level written by map_saver.
-const PGM_OCCUPIED: u8 = 0;
+pub(super) const PGM_OCCUPIED: u8 = 0;
 /// Thresholds written by `save_ros_map`. The free threshold is ROS 1 map_saver's 0.196, not
 /// nav2's 0.25: with 0.25 the unknown level 205 (p ≈ 0.19608) would read back as free.
-const SAVE_OCCUPIED_THRESH: f64 = 0.65;
-const SAVE_FREE_THRESH: f64 = 0.196;
+pub(super) const SAVE_OCCUPIED_THRESH: f64 = 0.65;
+pub(super) const SAVE_FREE_THRESH: f64 = 0.196;
 
 /// Loads a ROS map (YAML + PGM/PNG). Fails with a [`MapError`] naming the file and field when the
 /// YAML or image is missing or invalid, or when the map has no free cell.
