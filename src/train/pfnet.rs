@@ -135,7 +135,7 @@ pub fn simulate_data(
     let registry = standard_registry();
     let pipeline = Pipeline::load(Path::new(&config.collect_schedule), &registry)?;
     let simulate = |split: Split, maps: usize, count: usize, salt: u64| {
-        let mut scene = Scene::apartments(split, split.seeds().start, maps, 4);
+        let mut scene = Scene::apartments(split, 0, maps, 4);
         scene.maps = match scene.maps {
             crate::compose::MapSource::Procedural { split, first, count, .. } => {
                 crate::compose::MapSource::Procedural {
