@@ -198,6 +198,12 @@ mod tests {
     use crate::nn::sac::{SacHyper, SacNetConfig};
     use bevy::ecs::system::RunSystemOnce;
 
+    /// Robot 0 with the observations the policy reads and a fresh episode.
+    fn spawn_robot(world: &mut World, crop: BeliefCrop, grid: LocalGrid) -> Entity {
+        let episode = (Collided(false), Episode::default(), Reward(None), Action::default());
+        world.spawn((RobotId(0), crop, grid, episode)).id()
+    }
+
     fn tiny() -> SacNetConfig {
         SacNetConfig {
             conv_channels: vec![2],
@@ -219,17 +225,7 @@ mod tests {
         let agent = world.spawn(SacAgent::new(&tiny(), config, 1, 3, 7)).id();
         let crop = BeliefCrop { cells: 5, centres: vec![], values: vec![0.5; 100] };
         let grid = LocalGrid { cells: 5, values: vec![1.0; 25] };
-        let robot = world
-            .spawn((
-                RobotId(0),
-                crop,
-                grid,
-                Collided(false),
-                Episode::default(),
-                Reward(None),
-                Action::default(),
-            ))
-            .id();
+        let robot = spawn_robot(&mut world, crop, grid);
         // (episode step, reward of the last action, last step?)
         let frames = [
             (1, None, false),
@@ -282,17 +278,7 @@ mod tests {
                 values: (0..100).map(|i| (i % 7) as f32 / 7.0).collect(),
             };
             let grid = LocalGrid { cells: 5, values: vec![0.5; 25] };
-            let robot = world
-                .spawn((
-                    RobotId(0),
-                    crop,
-                    grid,
-                    Collided(false),
-                    Episode::default(),
-                    Reward(None),
-                    Action::default(),
-                ))
-                .id();
+            let robot = spawn_robot(&mut world, crop, grid);
             world.run_system_once(sac_policy).unwrap();
             *world.get::<Action>(robot).unwrap()
         };
