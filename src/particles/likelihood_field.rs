@@ -149,30 +149,128 @@ fn beam_offsets(scan: &LidarScan, max_beams: usize, resolution_m: f32) -> Vec<(f
         .collect()
 }
 
-/// Each beam's summand at d_k = k·max_dist/(LEN−1): log p(d) for the product, p(d)³ for AMCL's sum.
-/// Errors when a summand is not finite (log 0: parameters `StepParams::check` rejects, reaching
-/// the kernel unchecked), rather than letting it reset the weights.
-fn beam_term_table(params: &LikelihoodFieldParams, range_max_m: f32) -> Result<Vec<f32>, ParticleError> {
-    let sigma = params.sigma_hit.max(1e-6);
-    let rand = if range_max_m > 0.0 { params.z_rand / range_max_m } else { 0.0 };
-    let max_dist = params.laser_likelihood_max_dist.max(1e-6);
-    let table = (0..LOG_P_TABLE_LEN)
-        .map(|k| {
-            let d = k as f32 * max_dist / (LOG_P_TABLE_LEN - 1) as f32;
-            let p = params.z_hit * (-d * d / (2.0 * sigma * sigma)).exp() + rand;
-            match params.combine {
-                BeamCombination::Product => p.ln(),
-                BeamCombination::AmclCubeSum => p * p * p,
-            }
-        })
-        .collect::<Vec<f32>>();
-    match table.iter().all(|t| t.is_finite()) {
-        true => Ok(table),
-        false => Err(ParticleError::InvalidParam {
-            field: "sigma_hit, z_rand",
-            expected: "a likelihood above 0 at laser_likelihood_max_dist (raise sigma_hit or z_rand)",
-        }),
+/// The per-beam terms of one parameter set for scans of one `range_max_m`: each beam's summand
+/// at d_k = k·max_dist/(LEN−1) — log p(d) for the product, p(d)³ for AMCL's sum — in a table
+/// built once (1,024 exp + ln) and read by every particle and beam of every scan it weighs. A
+/// caller weighing many scans (the information-gain look-ahead: 160 per decision) builds it once.
+pub struct BeamTerms {
+    params: LikelihoodFieldParams,
+    range_max_m: f32,
+    table: Vec<f32>,
+}
+
+impl BeamTerms {
+    /// Errors when a summand is not finite (log 0: parameters `StepParams::check` rejects,
+    /// reaching the kernel unchecked), rather than letting it reset the weights.
+    pub fn new(params: &LikelihoodFieldParams, range_max_m: f32) -> Result<Self, ParticleError> {
+        let sigma = params.sigma_hit.max(1e-6);
+        let rand = if range_max_m > 0.0 { params.z_rand / range_max_m } else { 0.0 };
+        let max_dist = params.laser_likelihood_max_dist.max(1e-6);
+        let table = (0..LOG_P_TABLE_LEN)
+            .map(|k| {
+                let d = k as f32 * max_dist / (LOG_P_TABLE_LEN - 1) as f32;
+                let p = params.z_hit * (-d * d / (2.0 * sigma * sigma)).exp() + rand;
+                match params.combine {
+                    BeamCombination::Product => p.ln(),
+                    BeamCombination::AmclCubeSum => p * p * p,
+                }
+            })
+            .collect::<Vec<f32>>();
+        match table.iter().all(|t| t.is_finite()) {
+            true => Ok(Self { params: params.clone(), range_max_m, table }),
+            false => Err(ParticleError::InvalidParam {
+                field: "sigma_hit, z_rand",
+                expected: "a likelihood above 0 at laser_likelihood_max_dist (raise sigma_hit or z_rand)",
+            }),
+        }
     }
+
+    /// Adds each particle's log-likelihood of `scan` to its log-weight, as
+    /// [`add_log_likelihoods`] does. Errors (leaving the set untouched) when the scan's range_max
+    /// is not the one the terms were built for, or the field is malformed.
+    pub fn add_log_likelihoods(
+        &self,
+        set: &mut ParticleSet,
+        scan: &LidarScan,
+        field: &DistanceField,
+        origin: &Pose2,
+    ) -> Result<(), ParticleError> {
+        if scan.range_max_m != self.range_max_m {
+            return Err(ParticleError::InvalidParam {
+                field: "range_max_m",
+                expected: "the scan range the likelihood terms were built for",
+            });
+        }
+        let cells = field.width * field.height;
+        if field.distances_m.len() < cells {
+            let found = field.distances_m.len();
+            return Err(ParticleError::MalformedLayer { layer: "DistanceField", expected: cells, found });
+        }
+        let params = &self.params;
+        let inv_res = 1.0 / field.resolution_m;
+        let beams = beam_offsets(scan, params.max_beams, field.resolution_m);
+        let finish = match params.combine {
+            BeamCombination::Product => |sum: f32| sum,
+            BeamCombination::AmclCubeSum => |sum: f32| sum.ln_1p(),
+        };
+        let sum_over_beams = match params.interpolate {
+            true => beam_sum::<true>,
+            false => beam_sum::<false>,
+        };
+        let (so, co) = origin.yaw.sin_cos();
+        let ParticleSet { x, y, yaw, log_w } = set;
+        let chunks = log_w.par_chunks_mut(LIKELIHOOD_CHUNK).zip(x.par_chunks(LIKELIHOOD_CHUNK));
+        let chunks = chunks.zip(y.par_chunks(LIKELIHOOD_CHUNK)).zip(yaw.par_chunks(LIKELIHOOD_CHUNK));
+        chunks.for_each(|(((lws, xs), ys), yaws)| {
+            for (((lw, &px), &py), &pyaw) in lws.iter_mut().zip(xs).zip(ys).zip(yaws) {
+                if !(px.is_finite() && py.is_finite() && pyaw.is_finite()) {
+                    *lw = f32::NAN;
+                    continue;
+                }
+                // Particle pose in the grid frame, in cells; the origin's yaw is folded in once here.
+                let (dx, dy) = (px - origin.x, py - origin.y);
+                let grid_xy = ((co * dx + so * dy) * inv_res, (-so * dx + co * dy) * inv_res);
+                let sin_cos = (pyaw - origin.yaw).sin_cos();
+                *lw += finish(sum_over_beams(self, field, &beams, grid_xy, sin_cos));
+            }
+        });
+        Ok(())
+    }
+}
+
+/// Σ of `terms`' table over the endpoints of `beams` (robot-frame offsets in cells) seen from a
+/// particle at `grid_xy` (cells) with heading `(sin, cos)` in the grid frame. Monomorphised on
+/// the read so the hot loop holds no branch on it and keeps every invariant in a register.
+#[inline(always)]
+fn beam_sum<const INTERPOLATE: bool>(
+    terms: &BeamTerms,
+    field: &DistanceField,
+    beams: &[(f32, f32)],
+    (gx0, gy0): (f32, f32),
+    (s, c): (f32, f32),
+) -> f32 {
+    let (table, distances) = (&terms.table[..LOG_P_TABLE_LEN], &field.distances_m[..]);
+    let far = table[LOG_P_TABLE_LEN - 1];
+    let max_dist = terms.params.laser_likelihood_max_dist;
+    let scale = (LOG_P_TABLE_LEN - 1) as f32 / max_dist.max(1e-6);
+    let (w, wf, hf) = (field.width, field.width as f32, field.height as f32);
+    let mut sum = 0.0f32;
+    for &(bx, by) in beams {
+        let gx = gx0 + c * bx - s * by;
+        let gy = gy0 + s * bx + c * by;
+        // `as i32` (not `as usize`): f32→u64 is a slow multi-instruction sequence on x86-64.
+        sum += if gx >= 0.0 && gy >= 0.0 && gx < wf && gy < hf {
+            // No clamp to max_dist on the cell read: the index clamp below does it (∞ saturates).
+            let d = match INTERPOLATE {
+                true => field.surface_distance(gx, gy, max_dist),
+                false => distances[gy as i32 as usize * w + gx as i32 as usize],
+            };
+            table[((d * scale + 0.5) as i32 as usize).min(LOG_P_TABLE_LEN - 1)]
+        } else {
+            far
+        };
+    }
+    sum
 }
 
 /// Adds each particle's log-likelihood over the used beams — Σ log p, or ln(1 + Σ p³) for
@@ -189,59 +287,7 @@ pub fn add_log_likelihoods(
     origin: &Pose2,
     params: &LikelihoodFieldParams,
 ) -> Result<(), ParticleError> {
-    let cells = field.width * field.height;
-    if field.distances_m.len() < cells {
-        let found = field.distances_m.len();
-        return Err(ParticleError::MalformedLayer { layer: "DistanceField", expected: cells, found });
-    }
-    let inv_res = 1.0 / field.resolution_m;
-    let beams = beam_offsets(scan, params.max_beams, field.resolution_m);
-    let table = beam_term_table(params, scan.range_max_m)?;
-    let finish = match params.combine {
-        BeamCombination::Product => |sum: f32| sum,
-        BeamCombination::AmclCubeSum => |sum: f32| sum.ln_1p(),
-    };
-    let far = table[LOG_P_TABLE_LEN - 1];
-    let scale = (LOG_P_TABLE_LEN - 1) as f32 / params.laser_likelihood_max_dist.max(1e-6);
-    let max_dist = params.laser_likelihood_max_dist;
-    let (w, wf, hf) = (field.width, field.width as f32, field.height as f32);
-    let distance = |gx: f32, gy: f32| {
-        if params.interpolate {
-            field.surface_distance(gx, gy, max_dist)
-        } else {
-            field.distances_m[gy as i32 as usize * w + gx as i32 as usize].min(max_dist)
-        }
-    };
-    let (so, co) = origin.yaw.sin_cos();
-    let ParticleSet { x, y, yaw, log_w } = set;
-    let chunks = log_w.par_chunks_mut(LIKELIHOOD_CHUNK).zip(x.par_chunks(LIKELIHOOD_CHUNK));
-    let chunks = chunks.zip(y.par_chunks(LIKELIHOOD_CHUNK)).zip(yaw.par_chunks(LIKELIHOOD_CHUNK));
-    chunks.for_each(|(((lws, xs), ys), yaws)| {
-        for (((lw, &px), &py), &pyaw) in lws.iter_mut().zip(xs).zip(ys).zip(yaws) {
-            if !(px.is_finite() && py.is_finite() && pyaw.is_finite()) {
-                *lw = f32::NAN;
-                continue;
-            }
-            // Particle pose in the grid frame, in cells; the origin's yaw is folded in once here.
-            let (dx, dy) = (px - origin.x, py - origin.y);
-            let (gx0, gy0) = ((co * dx + so * dy) * inv_res, (-so * dx + co * dy) * inv_res);
-            let (s, c) = (pyaw - origin.yaw).sin_cos();
-            let mut sum = 0.0f32;
-            for &(bx, by) in &beams {
-                let gx = gx0 + c * bx - s * by;
-                let gy = gy0 + s * bx + c * by;
-                // `as i32` (not `as usize`): f32→u64 is a slow multi-instruction sequence on x86-64.
-                sum += if gx >= 0.0 && gy >= 0.0 && gx < wf && gy < hf {
-                    let d = distance(gx, gy);
-                    table[((d * scale + 0.5) as i32 as usize).min(LOG_P_TABLE_LEN - 1)]
-                } else {
-                    far
-                };
-            }
-            *lw += finish(sum);
-        }
-    });
-    Ok(())
+    BeamTerms::new(params, scan.range_max_m)?.add_log_likelihoods(set, scan, field, origin)
 }
 
 /// The full observation update: adds the log-likelihoods, then normalises through the guard

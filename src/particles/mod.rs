@@ -25,7 +25,7 @@ pub use init::{
 };
 pub use kld::{KldHistogram, KldParams};
 pub use likelihood_field::{
-    LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,
+    BeamTerms, LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,
     mcl_likelihood_field, selected_beams, weigh_likelihood_field,
 };
 pub use pfnet::{MapFeatures, PfNetLikelihoodParams, PfNetState, map_view, pfnet_likelihood, shared_model};

@@ -13,7 +13,7 @@ use crate::agent::Action;
 use crate::agent::infogain::entropy::histogram_entropy;
 use crate::agent::infogain::params::InfogainParams;
 use crate::particles::{
-    LikelihoodFieldParams, ParticleError, ParticleSet, TransitionParams, add_log_likelihoods, propagate,
+    BeamTerms, LikelihoodFieldParams, ParticleError, ParticleSet, TransitionParams, propagate,
     systematic_indices,
 };
 use crate::sense::{LidarParams, LidarScan, RayGrid, cast_scan};
@@ -86,6 +86,7 @@ pub fn score_candidates(
     // read, and 24 beams on 200 particles do not resolve the few cm it adds.
     let likelihood =
         LikelihoodFieldParams { max_beams: params.beams, interpolate: false, ..models.likelihood.clone() };
+    let terms = BeamTerms::new(&likelihood, lidar.range_max_m)?;
     let bin_rad = params.bin_size_deg.to_radians();
     let mut scan = LidarScan::default();
     let h_count = hypotheses.len() as f32;
@@ -107,7 +108,7 @@ pub fn score_candidates(
                         stream(&[key, TRANSITION_STREAM, h as u64, u64::from(s)]).random();
                     propagate(&mut moved, &pose.between(&step.pose), models.transition, transition_key);
                     cast_scan(view.grid, step.pose, &[], &lidar, &mut scan);
-                    add_log_likelihoods(&mut moved, &scan, view.field, &view.map.origin, &likelihood)?;
+                    terms.add_log_likelihoods(&mut moved, &scan, view.field, &view.map.origin)?;
                     (pose, collided, distance) =
                         (step.pose, collided | step.collided, distance + step.distance_m);
                 }
@@ -179,6 +180,7 @@ pub fn drive_on_map(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::particles::add_log_likelihoods;
     use crate::testing::tiny_room;
     use crate::world::Cell;
 
