@@ -39,6 +39,7 @@ fn run(
         episode: apfn::episode::EpisodeParams { steps, ..Default::default() },
         robot: Default::default(),
         swaps: Vec::new(),
+        inserts: Vec::new(),
         overrides: Vec::new(),
         localizer: None,
     };

@@ -133,6 +133,32 @@ fn eval_swaps_replace_a_step_in_every_schedule() {
 }
 
 #[test]
+fn eval_inserts_add_a_step_to_every_schedule() {
+    let dir = tempfile::tempdir().unwrap();
+    let turn = concat!(env!("CARGO_MANIFEST_DIR"), "/systems/turn.ron");
+    let config = |inserts: &str| {
+        format!(
+            "Eval(schedules: [{turn:?}], tasks: [global], maps: [Apartments(split: seen, count: 1)], \
+             episodes: 2, robots_per_map: 2, particles: Some(200), episode: (steps: 12), inserts: [{inserts}])"
+        )
+    };
+    let run = |name: &str, inserts: &str| {
+        let path = write(dir.path(), &format!("{name}.ron"), &config(inserts));
+        let out = dir.path().join(name);
+        apfn(&["eval", "--config", &path, "--out", out.to_str().unwrap()]).unwrap();
+        std::fs::read_to_string(out.join("episodes.csv")).unwrap()
+    };
+    let recovery = "(\"mcl_likelihood_field\", \"augmented_recovery\", (alpha_slow: 0.05, alpha_fast: 0.5))";
+    let (plain, augmented) = (run("plain", ""), run("augmented", recovery));
+    // Common random numbers: the robot drives the same path; only the filter's estimates differ.
+    let column = |csv: &str, k: usize| {
+        csv.lines().skip(1).map(|l| l.split(',').nth(k).unwrap().to_owned()).collect::<Vec<_>>()
+    };
+    assert_eq!(column(&plain, 8), column(&augmented, 8), "the same final true poses");
+    assert_ne!(column(&plain, 11), column(&augmented, 11), "recovery must change the global estimates");
+}
+
+#[test]
 fn broken_scene_names_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
     let scene =
@@ -214,6 +240,14 @@ fn bad_eval_configs_fail_before_any_work() {
                  swaps: [(\"mcl_beam_model\", \"mcl_likelihood_field\", ())])"
             ),
             "no schedule of this config runs `mcl_beam_model`",
+        ),
+        (
+            "insert after a step no schedule runs",
+            format!(
+                "Eval(schedules: [{SCHEDULE:?}], maps: [Apartments(split: seen, count: 1)], \
+                 inserts: [(\"mcl_beam_model\", \"augmented_recovery\", ())])"
+            ),
+            "inserts[0] (`augmented_recovery` after `mcl_beam_model`)",
         ),
         (
             "no tasks",

@@ -116,6 +116,32 @@ impl Pipeline {
         params: &str,
         registry: &Registry,
     ) -> Result<bool, String> {
+        self.edit_step(old, new, params, registry, |steps, index, step| steps[index] = step)
+    }
+
+    /// Inserts system `new` with `params` right after step `after` (e.g. `augmented_recovery`
+    /// after `mcl_likelihood_field`), then checks the schedule again as [`Self::replace_step`]
+    /// does. Returns whether this pipeline runs `after`.
+    pub fn insert_step_after(
+        &mut self,
+        after: &str,
+        new: &str,
+        params: &str,
+        registry: &Registry,
+    ) -> Result<bool, String> {
+        self.edit_step(after, new, params, registry, |steps, index, step| steps.insert(index + 1, step))
+    }
+
+    /// Finds step `at`, builds `new` from `params`, lets `edit` place it, and validates; a failed
+    /// edit leaves the schedule as it was.
+    fn edit_step(
+        &mut self,
+        at: &str,
+        new: &str,
+        params: &str,
+        registry: &Registry,
+        edit: impl FnOnce(&mut Vec<PipelineStep>, usize, PipelineStep),
+    ) -> Result<bool, String> {
         let known = |name: &str| {
             registry.get(name).ok_or_else(|| {
                 let hint =
@@ -123,18 +149,20 @@ impl Pipeline {
                 format!("unknown system `{name}`{hint}")
             })
         };
-        let (old_entry, new_entry) = (known(old)?, known(new)?);
-        let Some(index) = self.steps.iter().position(|s| s.name == old_entry.name) else {
+        let (at_entry, new_entry) = (known(at)?, known(new)?);
+        let Some(index) = self.steps.iter().position(|s| s.name == at_entry.name) else {
             return Ok(false);
         };
         let mut de = ron::Deserializer::from_str(params).map_err(|e| e.to_string())?;
         let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
         let system =
             new_entry.parse_params(&mut erased).map_err(|e| format!("parameters of `{new}`: {e}"))?;
-        let replaced = PipelineStep { name: new_entry.name, stage: new_entry.stage, system };
-        let kept = std::mem::replace(&mut self.steps[index], replaced);
+        let step = PipelineStep { name: new_entry.name, stage: new_entry.stage, system };
+        let kept = std::mem::take(&mut self.steps);
+        self.steps = kept.clone();
+        edit(&mut self.steps, index, step);
         if let Err(e) = self.validate(registry) {
-            self.steps[index] = kept; // a failed replacement leaves the schedule as it was
+            self.steps = kept;
             return Err(e.to_string());
         }
         Ok(true)
@@ -329,6 +357,37 @@ mod tests {
         assert!(e.contains("needs LocalGrid"), "{e}");
         assert!(p.steps[3].system.params_ron().contains("alpha: 0.25"), "{}", p.steps[3].system.params_ron());
         assert_eq!(p.names()[2], "mcl_beam_model");
+    }
+
+    #[test]
+    fn insert_step_after_adds_a_step_and_checks_the_schedule() {
+        let registry = standard_registry();
+        let mut p = parse(
+            r#"Schedule(steps: [("lidar", ()), ("init_particles", ()), ("mcl_likelihood_field", ()), ("resample", ())])"#,
+        )
+        .expect("valid schedule");
+        let mut insert = |after, new, params| p.insert_step_after(after, new, params, &registry);
+        assert_eq!(insert("depth", "augmented_recovery", "()"), Ok(false), "a step the schedule lacks");
+        let e = insert("mcl_likelihood_field", "augmented_recovery", "(alpha_slow: 0.5, alpha_fast: 0.1)")
+            .expect_err("fast below slow");
+        assert!(e.contains("alpha_fast"), "{e}");
+        let e = insert("lidar", "augmented_recovery", "()").expect_err("before any particles");
+        assert!(e.contains("needs ParticleSet"), "{e}");
+        let e = insert("init_particles", "init_particles", "()").expect_err("a system runs once");
+        assert!(e.contains("appears twice"), "{e}");
+        assert_eq!(
+            p.names(),
+            ["lidar", "init_particles", "mcl_likelihood_field", "resample"],
+            "failures change nothing"
+        );
+        assert_eq!(
+            p.insert_step_after("mcl_likelihood_field", "augmented_recovery", "()", &registry),
+            Ok(true)
+        );
+        assert_eq!(
+            p.names(),
+            ["lidar", "init_particles", "mcl_likelihood_field", "augmented_recovery", "resample"]
+        );
     }
 
     #[test]

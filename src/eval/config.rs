@@ -57,6 +57,11 @@ pub struct EvalConfig {
     /// evaluates every policy with PF-net as the localizer from the same schedule files.
     #[serde(default)]
     pub swaps: Vec<(String, String, Box<RawValue>)>,
+    /// Steps inserted right after another in every schedule that runs it, applied after `swaps`
+    /// and before `overrides`: `inserts: [("mcl_likelihood_field", "augmented_recovery",
+    /// (alpha_slow: 0.05, alpha_fast: 0.5))]` evaluates every policy with augmented MCL.
+    #[serde(default)]
+    pub inserts: Vec<(String, String, Box<RawValue>)>,
     /// The localizer's name in the tables; `None` derives it from the schedules' likelihood step.
     #[serde(default)]
     pub localizer: Option<String>,
@@ -72,6 +77,13 @@ fn fifty() -> usize {
 
 fn five() -> usize {
     5
+}
+
+/// How a config entry edits the schedules.
+#[derive(Clone, Copy)]
+enum Edit {
+    Replace,
+    InsertAfter,
 }
 
 /// One column group of the results table.
@@ -205,21 +217,25 @@ impl EvalConfig {
             .collect::<Result<Vec<_>, ComposeError>>()?;
         // An override is a swap of a step for itself with other parameters.
         let swaps = self.swaps.iter().enumerate().map(|(index, (old, new, params))| {
-            (format!("swaps[{index}] (`{old}` → `{new}`)"), old, new, params)
+            (format!("swaps[{index}] (`{old}` → `{new}`)"), Edit::Replace, old, new, params)
         });
-        let overrides =
-            self.overrides.iter().enumerate().map(|(index, (name, params))| {
-                (format!("overrides[{index}] (`{name}`)"), name, name, params)
-            });
-        for (field, old, new, params) in swaps.chain(overrides) {
+        let inserts = self.inserts.iter().enumerate().map(|(index, (after, new, params))| {
+            (format!("inserts[{index}] (`{new}` after `{after}`)"), Edit::InsertAfter, after, new, params)
+        });
+        let overrides = self.overrides.iter().enumerate().map(|(index, (name, params))| {
+            (format!("overrides[{index}] (`{name}`)"), Edit::Replace, name, name, params)
+        });
+        for (field, edit, at, new, params) in swaps.chain(inserts).chain(overrides) {
             let mut applied = false;
             for (_, pipeline) in &mut schedules {
-                applied |= pipeline
-                    .replace_step(old, new, params.get_ron(), &registry)
-                    .map_err(|message| invalid(&field, message))?;
+                let edited = match edit {
+                    Edit::Replace => pipeline.replace_step(at, new, params.get_ron(), &registry),
+                    Edit::InsertAfter => pipeline.insert_step_after(at, new, params.get_ron(), &registry),
+                };
+                applied |= edited.map_err(|message| invalid(&field, message))?;
             }
             if !applied {
-                return Err(invalid(&field, format!("no schedule of this config runs `{old}`")));
+                return Err(invalid(&field, format!("no schedule of this config runs `{at}`")));
             }
         }
         let scenes = self
