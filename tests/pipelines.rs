@@ -102,3 +102,25 @@ fn belief_crop_follows_the_filter_in_a_running_pipeline() {
         assert_eq!(free[25 * 50 + 25], 1.0, "the estimate stands in free space");
     }
 }
+
+#[test]
+fn every_shipped_eval_config_loads() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let shared_maps = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/maps");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).expect("scenes/ exists") {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        if !(name.starts_with("eval_") && name.ends_with(".ron")) {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        if text.contains("../shared/") && !shared_maps.exists() {
+            eprintln!("skipping {name}: ../shared/maps is absent");
+            continue;
+        }
+        apfn::eval::EvalConfig::load(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+        checked += 1;
+    }
+    assert!(checked > 0, "scenes/ holds eval configs");
+}
