@@ -6,6 +6,8 @@
 
 #[cfg(target_arch = "x86_64")]
 mod direct;
+#[cfg(target_arch = "x86_64")]
+mod strided;
 
 use crate::nn::gemm::{MatMut, MatRef, matmul};
 
@@ -197,6 +199,10 @@ impl Conv2d {
         if self.stride == 1 && direct::available() {
             return self.forward_direct(&g, weight, bias, x, y, y_channels, y_offset, scratch);
         }
+        #[cfg(target_arch = "x86_64")]
+        if self.runs_strided(false) {
+            return self.forward_strided(&g, weight, bias, x, n, y, (y_channels, y_offset), scratch);
+        }
         self.forward_im2col(&g, weight, bias, x, y, y_channels, y_offset, scratch);
     }
 
@@ -302,6 +308,10 @@ impl Conv2d {
         #[cfg(target_arch = "x86_64")]
         if self.stride == 1 && direct::available() {
             return self.backward_direct(&g, weight, x, dy, dy_slice, dweight, dbias, dx, scratch);
+        }
+        #[cfg(target_arch = "x86_64")]
+        if self.runs_strided(dx.is_some()) {
+            return self.backward_strided(&g, weight, x, n, dy, dy_slice, dweight, dbias, dx, scratch);
         }
         self.backward_im2col(&g, weight, x, dy, dy_slice, dweight, dbias, dx, scratch);
     }
@@ -677,6 +687,28 @@ mod tests {
         check(conv(2, 4, 7, 1, 2, Padding::Same), 1, 9, 17, 5, 1, 93);
         check(conv(1, 2, 9, 1, 1, Padding::Same), 2, 10, 9, 2, 0, 94);
         check(conv(2, 3, 2, 1, 1, Padding::Same), 1, 6, 5, 3, 0, 95);
+    }
+
+    /// The channels-in-lanes strided path (`strided.rs`): SAC's odd sizes 27 → 13 → 6 → 2 with
+    /// c_in = 1 (only its dweight runs there: dx needs c_in in whole vectors, so it takes im2col)
+    /// and c_in > 16, 16-channel tiles (c_out 16) and a 32-channel tile with a tail (48), pixel
+    /// tails, dilation 2, stride 3, n up to 3, into channel slices.
+    #[test]
+    fn strided_kernel_shapes() {
+        use Padding::Valid;
+        let shapes = [
+            (conv(1, 16, 3, 2, 1, Valid), 2, 27, 27, (20, 3)),
+            (conv(16, 16, 3, 2, 1, Valid), 2, 13, 13, (16, 0)),
+            (conv(32, 16, 3, 2, 1, Valid), 3, 6, 6, (40, 8)),
+            (conv(16, 48, 3, 2, 1, Valid), 1, 7, 8, (50, 1)),
+            (conv(16, 32, 3, 2, 2, Valid), 2, 11, 9, (32, 0)),
+            (conv(16, 16, 2, 3, 1, Valid), 1, 8, 10, (17, 1)),
+        ];
+        for (seed, (c, n, h, w, slice)) in (110..).zip(shapes) {
+            #[cfg(target_arch = "x86_64")]
+            assert!(!direct::available() || c.runs_strided(false), "{c:?} must take the strided path");
+            check(c, n, h, w, slice.0, slice.1, seed);
+        }
     }
 
     /// The im2col backward on stride-1 shapes, which the dispatch sends to the direct kernels.
