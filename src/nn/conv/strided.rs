@@ -8,7 +8,7 @@
 //! `apfn sac bench --config compact` (batch 256, 2 threads, shared 2-core box under load), min of
 //! runs per update: im2col 272 ms; the polyphase rewrite onto `direct.rs` (a 2×2 stride-1 conv
 //! over 4·c_in phase channels, 16/9 the work) 404 ms; im2col with vectorised stride-2 gathers
-//! 272 ms, with 4× smaller column groups 222 ms; this file ≈ 150 ms.
+//! 272 ms, with 4× smaller column groups 222 ms; this file ≈ 120 ms.
 //!
 //! Every kernel walks the pixels of all `n` samples as one sequence, so 2 × 2 outputs still fill
 //! whole register tiles. The outputs are pixel-major (`[pixel][channel]`); the callers transpose.
@@ -18,6 +18,7 @@ use std::arch::x86_64::{
     _mm512_storeu_ps,
 };
 
+use super::transpose::transpose;
 use super::{Conv2d, Geometry, Padding, sum};
 
 const LANES: usize = 16;
@@ -319,9 +320,16 @@ impl Conv2d {
         Plan { c_in, c_out, kernel, stride, dilation, h: g.h, w: g.w, oh: g.oh, ow: g.ow }
     }
 
-    /// `forward` on this path: the weight transposed to [tap][c_out], one kernel call, and its
-    /// pixel-major output transposed into y's channel slice (a scatter per vector cost 3/4 of the
-    /// kernel's time).
+    /// Samples per kernel call: enough that small outputs still make long pixel sequences, few
+    /// enough that a group's pixel-major buffer (`per_sample` floats each, ≤ 64 KB in all) stays in
+    /// cache for its transpose (whole-call buffers of up to 1.5 MB left ≈ 10 % on the table).
+    pub(super) fn strided_group(per_sample: usize, n: usize) -> usize {
+        (16_384 / per_sample.max(1)).clamp(1, n.max(1))
+    }
+
+    /// `forward` on this path: the weight transposed to [tap][c_out]; per group of samples, one
+    /// kernel call whose pixel-major output is transposed into y's channel slice (scattering each
+    /// vector instead cost 3/4 of the kernel's time).
     #[allow(clippy::too_many_arguments)]
     pub(super) fn forward_strided(
         &self,
@@ -334,21 +342,25 @@ impl Conv2d {
         (y_channels, y_offset): (usize, usize),
         scratch: &mut Vec<f32>,
     ) {
-        let p = g.pixels();
+        let (p, x_len) = (g.pixels(), self.c_in * g.h * g.w);
         if n * p == 0 {
             return;
         }
-        let [wt, yt] = carve(scratch, [self.weight_len(), n * p * self.c_out]);
-        transpose(weight, self.c_out, self.taps(), wt, |d, v| *d = v);
-        self.strided_plan(g).forward(wt, bias, x, n, yt);
-        for (i, yt_n) in yt.chunks_exact(p * self.c_out).enumerate() {
-            let y_n = &mut y[(i * y_channels + y_offset) * p..][..self.c_out * p];
-            transpose(yt_n, p, self.c_out, y_n, |d, v| *d = v);
+        let (plan, group) = (self.strided_plan(g), Self::strided_group(p * self.c_out, n));
+        let [wt, yt] = carve(scratch, [self.weight_len(), group * p * self.c_out]);
+        transpose(weight, self.c_out, self.taps(), wt, false);
+        for (x_g, y_g) in x.chunks(group * x_len).zip(y.chunks_mut(group * y_channels * p)) {
+            let m = x_g.len() / x_len;
+            let yt = &mut yt[..m * p * self.c_out];
+            plan.forward(wt, bias, x_g, m, yt);
+            for (yt_n, y_n) in yt.chunks_exact(p * self.c_out).zip(y_g.chunks_exact_mut(y_channels * p)) {
+                transpose(yt_n, p, self.c_out, &mut y_n[y_offset * p..][..self.c_out * p], false);
+            }
         }
     }
 
-    /// `backward` on this path: dy transposed to pixel-major for dweight; dx computed pixel-major
-    /// and transposed back.
+    /// `backward` on this path, per group of samples: dy transposed to pixel-major for dweight;
+    /// dx computed pixel-major and transposed back.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn backward_strided(
         &self,
@@ -360,30 +372,22 @@ impl Conv2d {
         (y_channels, y_offset): (usize, usize),
         dweight: &mut [f32],
         dbias: &mut [f32],
-        dx: Option<&mut [f32]>,
+        mut dx: Option<&mut [f32]>,
         scratch: &mut Vec<f32>,
     ) {
-        let (p, taps, kk) = (g.pixels(), self.taps(), self.kernel * self.kernel);
+        let (p, taps, kk, x_len) =
+            (g.pixels(), self.taps(), self.kernel * self.kernel, self.c_in * g.h * g.w);
         if n * p == 0 {
             return;
         }
-        let plan = self.strided_plan(g);
-        let dx_len = if dx.is_some() { x.len() } else { 0 };
+        let dx_len = if dx.is_some() { x_len } else { 0 };
+        let (plan, group) = (self.strided_plan(g), Self::strided_group((p * self.c_out).max(dx_len), n));
         let [dyt, dwt, wx, dxt] = carve(
             scratch,
-            [n * p * self.c_out, self.weight_len(), dx_len.min(1) * self.weight_len(), dx_len],
+            [group * p * self.c_out, self.weight_len(), dx_len.min(1) * self.weight_len(), group * dx_len],
         );
-        for (i, dyt_n) in dyt.chunks_exact_mut(p * self.c_out).enumerate() {
-            let dy_n = &dy[(i * y_channels + y_offset) * p..][..self.c_out * p];
-            transpose(dy_n, self.c_out, p, dyt_n, |d, v| *d = v);
-            for (db, row) in dbias.iter_mut().zip(dy_n.chunks_exact(p)) {
-                *db += sum(row);
-            }
-        }
         dwt.fill(0.0);
-        plan.backward_weight(dyt, x, n, dwt);
-        transpose(dwt, taps, self.c_out, dweight, |d, v| *d += v);
-        if let Some(dx) = dx {
+        if dx.is_some() {
             // wx [k·k][c_out][c_in] = weight [c_out][c_in][k·k]
             for (o, w_o) in weight.chunks_exact(taps).enumerate() {
                 for (c, w_oc) in w_o.chunks_exact(kk).enumerate() {
@@ -392,23 +396,31 @@ impl Conv2d {
                     }
                 }
             }
-            dxt.fill(0.0);
-            plan.backward_input(wx, dy, n, (y_channels, y_offset), dxt);
-            let hw = g.h * g.w;
-            for (dxt_n, dx_n) in dxt.chunks_exact(hw * self.c_in).zip(dx.chunks_exact_mut(hw * self.c_in)) {
-                transpose(dxt_n, hw, self.c_in, dx_n, |d, v| *d += v);
+        }
+        for (first, x_g) in (0..n).step_by(group).zip(x.chunks(group * x_len)) {
+            let m = x_g.len() / x_len;
+            let dy_g = &dy[first * y_channels * p..][..m * y_channels * p];
+            let dyt = &mut dyt[..m * p * self.c_out];
+            for (dyt_n, dy_n) in dyt.chunks_exact_mut(p * self.c_out).zip(dy_g.chunks_exact(y_channels * p)) {
+                let dy_n = &dy_n[y_offset * p..][..self.c_out * p];
+                transpose(dy_n, self.c_out, p, dyt_n, false);
+                for (db, row) in dbias.iter_mut().zip(dy_n.chunks_exact(p)) {
+                    *db += sum(row);
+                }
+            }
+            plan.backward_weight(dyt, x_g, m, dwt);
+            if let Some(dx) = dx.as_deref_mut() {
+                let dxt = &mut dxt[..m * x_len];
+                dxt.fill(0.0);
+                plan.backward_input(wx, dy_g, m, (y_channels, y_offset), dxt);
+                let hw = g.h * g.w;
+                let dx_g = &mut dx[first * x_len..][..m * x_len];
+                for (dxt_n, dx_n) in dxt.chunks_exact(x_len).zip(dx_g.chunks_exact_mut(x_len)) {
+                    transpose(dxt_n, hw, self.c_in, dx_n, true);
+                }
             }
         }
-    }
-}
-
-/// `f(dst[j][i], src[i][j])` for src [rows][cols], dst [cols][rows]: a transpose that copies or adds.
-fn transpose(src: &[f32], rows: usize, cols: usize, dst: &mut [f32], f: impl Fn(&mut f32, f32)) {
-    assert_eq!((src.len(), dst.len()), (rows * cols, rows * cols), "transpose lengths");
-    for (i, row) in src.chunks_exact(cols).enumerate() {
-        for (j, &v) in row.iter().enumerate() {
-            f(&mut dst[j * rows + i], v);
-        }
+        transpose(dwt, taps, self.c_out, dweight, true);
     }
 }
 
