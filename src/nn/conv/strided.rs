@@ -63,22 +63,24 @@ impl Plan {
         i * self.x_len() + (r / self.ow * self.w + r % self.ow) * self.stride
     }
 
+    /// What the kernels' safety rests on: AVX-512F, a `lanes` side (c_out, or c_in for dx) of
+    /// whole vectors, and every tap of every output pixel inside the input.
+    fn check(&self, n: usize, lanes: usize) {
+        assert!(super::direct::available(), "strided conv needs AVX-512F");
+        assert!(lanes.is_multiple_of(LANES) && n * self.pixels() > 0, "{lanes} channels, {n} samples");
+        let span = (self.kernel - 1) * self.dilation;
+        let inside =
+            (self.oh - 1) * self.stride + span < self.h && (self.ow - 1) * self.stride + span < self.w;
+        assert!(inside, "taps past the input: {self:?}");
+    }
+
     /// yt [n·P][c_out] ← bias[o] + Σ_taps wt[tap][o] · x[i][tap at pixel], for the `n` samples of
     /// x [n][c_in][h][w]; wt is [c_in·k·k][c_out].
     pub fn forward(&self, wt: &[f32], bias: &[f32], x: &[f32], n: usize, yt: &mut [f32]) {
-        assert!(super::direct::available(), "strided conv needs AVX-512F");
-        assert!(self.c_out.is_multiple_of(LANES) && n * self.pixels() > 0);
-        assert!(
-            (self.oh - 1) * self.stride + (self.kernel - 1) * self.dilation < self.h,
-            "taps past the input"
-        );
-        assert!(
-            (self.ow - 1) * self.stride + (self.kernel - 1) * self.dilation < self.w,
-            "taps past the input"
-        );
+        self.check(n, self.c_out);
         assert_eq!((wt.len(), bias.len(), x.len()), (self.taps() * self.c_out, self.c_out, n * self.x_len()));
         assert_eq!(yt.len(), n * self.pixels() * self.c_out, "yt length");
-        // SAFETY: AVX-512F checked above; every tap of every pixel lies inside x (asserted above),
+        // SAFETY: `check` and the lengths above: every tap of every pixel lies inside x,
         // every weight and bias load inside a multiple-of-16 channel block, every store inside
         // a pixel's row of yt.
         unsafe {
@@ -146,16 +148,7 @@ impl Plan {
     /// dwt [c_in·k·k][c_out] += Σ_pixels dyt[pixel][o] · x[tap at pixel], over the `n` samples of
     /// x; dyt is [n·P][c_out], dy pixel-major.
     pub fn backward_weight(&self, dyt: &[f32], x: &[f32], n: usize, dwt: &mut [f32]) {
-        assert!(super::direct::available(), "strided conv needs AVX-512F");
-        assert!(self.c_out.is_multiple_of(LANES) && n * self.pixels() > 0);
-        assert!(
-            (self.oh - 1) * self.stride + (self.kernel - 1) * self.dilation < self.h,
-            "taps past the input"
-        );
-        assert!(
-            (self.ow - 1) * self.stride + (self.kernel - 1) * self.dilation < self.w,
-            "taps past the input"
-        );
+        self.check(n, self.c_out);
         assert_eq!(
             (dyt.len(), x.len(), dwt.len()),
             (n * self.pixels() * self.c_out, n * self.x_len(), self.taps() * self.c_out)
@@ -231,22 +224,13 @@ impl Plan {
         (y_channels, y_offset): (usize, usize),
         dxt: &mut [f32],
     ) {
-        assert!(super::direct::available(), "strided conv needs AVX-512F");
-        assert!(self.c_in.is_multiple_of(LANES) && n * self.pixels() > 0);
-        assert!(
-            (self.oh - 1) * self.stride + (self.kernel - 1) * self.dilation < self.h,
-            "taps past the input"
-        );
-        assert!(
-            (self.ow - 1) * self.stride + (self.kernel - 1) * self.dilation < self.w,
-            "taps past the input"
-        );
+        self.check(n, self.c_in);
         assert_eq!((wx.len(), dxt.len()), (self.taps() * self.c_out, n * self.x_len()));
         assert!(
             y_offset + self.c_out <= y_channels && dy.len() == n * y_channels * self.pixels(),
             "dy length"
         );
-        // SAFETY: AVX-512F checked above; dy reads stay in sample i's channel slice, wx and dxt
+        // SAFETY: `check` and the lengths above: dy reads stay in sample i's channel slice, wx and dxt
         // are read and written in whole 16-channel blocks of rows inside them.
         unsafe { self.input_tiles::<2, 9>(wx, dy, n, (y_channels, y_offset), dxt) }
     }
