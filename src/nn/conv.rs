@@ -1,11 +1,16 @@
 //! 2-D convolution (NCHW, square kernel, stride, dilation, TensorFlow padding) as im2col + one GEMM
 //! per sample. The GEMM puts the narrow output-channel side on the rows, `y_n[c_out × P] = W[c_out × K]
 //! · cols[K × P]` (K = c_in·k·k taps, P = oh·ow pixels), and writes straight into y's channel slice.
-//! The forward pass of a stride-1 conv instead runs a direct AVX-512 kernel where the CPU has one
-//! (`direct.rs`, several times faster on PF-net's shapes); backward is always im2col + GEMM.
+//! Where the CPU has AVX-512, convs run direct kernels instead, forward and backward: stride-1
+//! ones with pixels in the lanes (`direct.rs`, several times faster on PF-net's shapes), strided
+//! 'valid' ones with channels in the lanes (`strided.rs`, SAC's encoders). im2col is the fallback.
 
 #[cfg(target_arch = "x86_64")]
 mod direct;
+#[cfg(target_arch = "x86_64")]
+mod strided;
+#[cfg(target_arch = "x86_64")]
+mod transpose;
 
 use crate::nn::gemm::{MatMut, MatRef, matmul};
 
@@ -197,6 +202,10 @@ impl Conv2d {
         if self.stride == 1 && direct::available() {
             return self.forward_direct(&g, weight, bias, x, y, y_channels, y_offset, scratch);
         }
+        #[cfg(target_arch = "x86_64")]
+        if self.runs_strided(false) {
+            return self.forward_strided(&g, weight, bias, x, n, y, (y_channels, y_offset), scratch);
+        }
         self.forward_im2col(&g, weight, bias, x, y, y_channels, y_offset, scratch);
     }
 
@@ -302,6 +311,10 @@ impl Conv2d {
         #[cfg(target_arch = "x86_64")]
         if self.stride == 1 && direct::available() {
             return self.backward_direct(&g, weight, x, dy, dy_slice, dweight, dbias, dx, scratch);
+        }
+        #[cfg(target_arch = "x86_64")]
+        if self.runs_strided(dx.is_some()) {
+            return self.backward_strided(&g, weight, x, n, dy, dy_slice, dweight, dbias, dx, scratch);
         }
         self.backward_im2col(&g, weight, x, dy, dy_slice, dweight, dbias, dx, scratch);
     }
@@ -677,6 +690,61 @@ mod tests {
         check(conv(2, 4, 7, 1, 2, Padding::Same), 1, 9, 17, 5, 1, 93);
         check(conv(1, 2, 9, 1, 1, Padding::Same), 2, 10, 9, 2, 0, 94);
         check(conv(2, 3, 2, 1, 1, Padding::Same), 1, 6, 5, 3, 0, 95);
+    }
+
+    /// The channels-in-lanes strided path (`strided.rs`): SAC's odd sizes 27 → 13 → 6 → 2 with
+    /// c_in = 1 (only its dweight runs there: dx needs c_in in whole vectors, so it takes im2col)
+    /// and c_in > 16, 16-channel tiles (c_out 16) and a 32-channel tile with a tail (48), pixel
+    /// tails, dilation 2, stride 3, n up to 3, into channel slices.
+    #[test]
+    fn strided_kernel_shapes() {
+        use Padding::Valid;
+        let shapes = [
+            (conv(1, 16, 3, 2, 1, Valid), 2, 27, 27, (20, 3)),
+            (conv(16, 16, 3, 2, 1, Valid), 2, 13, 13, (16, 0)),
+            (conv(32, 16, 3, 2, 1, Valid), 3, 6, 6, (40, 8)),
+            (conv(16, 48, 3, 2, 1, Valid), 1, 7, 8, (50, 1)),
+            (conv(16, 32, 3, 2, 2, Valid), 2, 11, 9, (32, 0)),
+            (conv(16, 16, 2, 3, 1, Valid), 1, 8, 10, (17, 1)),
+        ];
+        for (seed, (c, n, h, w, slice)) in (110..).zip(shapes) {
+            #[cfg(target_arch = "x86_64")]
+            assert!(!direct::available() || c.runs_strided(false), "{c:?} must take the strided path");
+            check(c, n, h, w, slice.0, slice.1, seed);
+        }
+    }
+
+    /// The strided path splits a call into groups of samples; a 3-sample call split 2 + 1 must
+    /// give what three 1-sample calls give.
+    #[test]
+    fn strided_groups_match_single_samples() {
+        let (c, n, side) = (conv(16, 16, 3, 2, 1, Padding::Valid), 3, 21);
+        #[cfg(target_arch = "x86_64")]
+        assert_eq!(Conv2d::strided_group(c.c_in * side * side, n), 2, "the call must split into groups");
+        let (x_len, (oh, ow)) = (c.c_in * side * side, c.output_size(side, side));
+        let y_len = c.c_out * oh * ow;
+        let (wt, b) = (test_values(c.weight_len(), 120), test_values(c.c_out, 121));
+        let (x, dy) = (test_values(n * x_len, 122), test_values(n * y_len, 123));
+        let mut scratch = Vec::new();
+        let run = |x: &[f32], dy: &[f32], m: usize, scratch: &mut Vec<f32>| {
+            let mut y = vec![0.0; m * y_len];
+            c.forward(&wt, &b, x, m, side, side, &mut y, c.c_out, 0, scratch);
+            let (mut dw, mut db, mut dx) = (vec![0.0; wt.len()], vec![0.0; b.len()], vec![0.0; x.len()]);
+            c.backward(&wt, x, m, side, side, dy, c.c_out, 0, &mut dw, &mut db, Some(&mut dx), scratch);
+            [y, dw, db, dx]
+        };
+        let whole = run(&x, &dy, n, &mut scratch);
+        let mut single = [vec![], vec![0.0; wt.len()], vec![0.0; b.len()], vec![]];
+        for i in 0..n {
+            let [y, dw, db, dx] = run(&x[i * x_len..][..x_len], &dy[i * y_len..][..y_len], 1, &mut scratch);
+            single[0].extend(y);
+            single[1].iter_mut().zip(dw).for_each(|(a, v)| *a += v);
+            single[2].iter_mut().zip(db).for_each(|(a, v)| *a += v);
+            single[3].extend(dx);
+        }
+        for ((got, want), what) in whole.iter().zip(&single).zip(["y", "dweight", "dbias", "dx"]) {
+            assert_close(got, &f64s(want), 1e-6, what);
+        }
     }
 
     /// The im2col backward on stride-1 shapes, which the dispatch sends to the direct kernels.
