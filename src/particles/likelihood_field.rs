@@ -51,7 +51,8 @@ pub struct LikelihoodFieldParams {
     pub combine: BeamCombination,
     /// Read the distance field interpolated to cell faces (`true`: a few cm more accurate on
     /// 0.1 m maps, see `docs/results/coarse_maps.md`) or at the endpoint's cell (`false`: nav2's
-    /// lookup, one read per beam instead of four, about twice as fast).
+    /// lookup, one read per beam instead of four: 0.43 against 0.81 ms in `benches/likelihood_field.rs`
+    /// when measured, before the beam loop was monomorphised on the read).
     pub interpolate: bool,
 }
 
