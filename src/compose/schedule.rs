@@ -158,8 +158,7 @@ impl Pipeline {
         let system =
             new_entry.parse_params(&mut erased).map_err(|e| format!("parameters of `{new}`: {e}"))?;
         let step = PipelineStep { name: new_entry.name, stage: new_entry.stage, system };
-        let kept = std::mem::take(&mut self.steps);
-        self.steps = kept.clone();
+        let kept = self.steps.clone();
         edit(&mut self.steps, index, step);
         if let Err(e) = self.validate(registry) {
             self.steps = kept;
