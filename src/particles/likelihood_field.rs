@@ -614,6 +614,31 @@ mod tests {
     }
 
     #[test]
+    fn beam_terms_weigh_many_scans_as_one_call_each_and_refuse_another_range() {
+        let map = tiny_room();
+        let field = DistanceField::build(&map);
+        let poses = [Pose2::new(0.6, 0.6, 0.0), Pose2::new(1.2, 0.9, 1.0), Pose2::new(0.9, 0.5, -2.0)];
+        let params = LikelihoodFieldParams { interpolate: false, ..Default::default() };
+        let first = marched_scan(&map, poses[0]);
+        let terms = BeamTerms::new(&params, first.range_max_m).expect("valid parameters");
+        for truth in poses {
+            let scan = marched_scan(&map, truth);
+            let (mut once, mut each) = (ParticleSet::from_poses(&poses), ParticleSet::from_poses(&poses));
+            terms.add_log_likelihoods(&mut once, &scan, &field, &map.origin).expect("same range");
+            add_log_likelihoods(&mut each, &scan, &field, &map.origin, &params).expect("valid");
+            assert_eq!(
+                once.log_w, each.log_w,
+                "terms built once weigh scan from {truth:?} as a fresh call does"
+            );
+        }
+        let shorter = LidarScan { range_max_m: first.range_max_m / 2.0, ..first };
+        let mut set = ParticleSet::from_poses(&poses);
+        let r = terms.add_log_likelihoods(&mut set, &shorter, &field, &map.origin);
+        assert!(matches!(r, Err(ParticleError::InvalidParam { field: "range_max_m", .. })), "got {r:?}");
+        assert!(set.log_w.iter().all(|&l| l == set.log_w[0]), "a refused scan leaves the weights alone");
+    }
+
+    #[test]
     fn beam_indices_are_even_and_exact() {
         assert_eq!(beam_indices(228, 60).len(), 60);
         assert_eq!(beam_indices(5, 3), vec![0, 2, 4]);
