@@ -7,7 +7,8 @@ use apfn::cli::{Cli, run};
 use apfn::compose::{LoadedScene, MapSource, Scene};
 use apfn::particles::Task;
 use apfn::replay::{
-    EstimateLine, InitialGuess, Localizer, LocalizerParams, LogLine, MIN_FIT, read_log, scan_fit, to_jsonl,
+    EstimateLine, InitialGuess, Localizer, LocalizerParams, LogLine, MIN_FIT, SHIPPED_PFNET, read_log,
+    scan_fit, to_jsonl,
 };
 use apfn::world::map::procedural::{Split, generate_apartment};
 use apfn::world::map::{DistanceField, load_ros_map};
@@ -236,6 +237,43 @@ fn replay_cli_record_then_localize() {
     let estimates: Vec<EstimateLine> = text.lines().map(|l| serde_json::from_str(l).expect("line")).collect();
     let errors = position_errors(&lines, &estimates);
     assert!(errors[39] < 0.3, "KLD tracking run ends within 0.3 m: {errors:?}");
+}
+
+#[test]
+fn replay_pfnet_tracks_a_recorded_log_through_the_same_systems() {
+    let shipped = Path::new(SHIPPED_PFNET);
+    if !shipped.is_file() {
+        return eprintln!("skipped: {} is absent (run from the repository's root)", shipped.display());
+    }
+    let rec = record_small(40);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (log, est) = (dir.path().join("run.jsonl"), dir.path().join("est.jsonl"));
+    std::fs::write(&log, to_jsonl(&rec.lines).expect("serialise")).expect("write log");
+    let yaml = export_map(&rec, dir.path()).expect("export");
+    let base = ["apfn", "localize", "--map", s(&yaml), "--log", s(&log), "--seed", "2", "--out", s(&est)];
+    run(parse(&[&base[..], &["--localizer", "pfnet"]].concat())).expect("localize --localizer pfnet runs");
+    let estimates: Vec<EstimateLine> = std::fs::read_to_string(&est)
+        .expect("EST written")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("each EST line parses"))
+        .collect();
+    assert_eq!(estimates.len(), rec.lines.len(), "one estimate per log line");
+    let errors = position_errors(&rec.lines, &estimates);
+    let half = &errors[errors.len() / 2..];
+    let mean = half.iter().sum::<f32>() / half.len() as f32;
+    // The compact PF-net tracks apartments to ~30 cm (docs/results/passive.md); the start alone is
+    // 0.3 m off per axis, and a filter that ignored its scans would drift with the odometry.
+    assert!(mean < 0.45, "PF-net tracking: mean error over the last half {mean} m; errors {errors:?}");
+
+    let missing = dir.path().join("nowhere.safetensors");
+    let flag = format!("pfnet:{}", missing.display());
+    let err =
+        format!("{:#}", run(parse(&[&base[..], &["--localizer", &flag]].concat())).expect_err("no file"));
+    assert!(err.contains("nowhere.safetensors"), "the missing checkpoint is named: {err}");
+    let err = Cli::try_parse_from([&base[..], &["--localizer", "beam:x.safetensors"]].concat())
+        .expect_err("beam takes no checkpoint")
+        .to_string();
+    assert!(err.contains("only pfnet"), "a checkpoint on a classical model is refused: {err}");
 }
 
 #[test]

@@ -18,6 +18,7 @@ use crate::particles::{
     PoseEstimate, RecoveryParams, ResampleParams, TransitionParams, augmented_recovery, estimate,
     init_particles, mcl_beam_model, mcl_likelihood_field, pfnet_likelihood, resample, transition,
 };
+use crate::replay::log_feed;
 use crate::sense::{
     DepthParams, DepthStrip, LidarParams, LidarScan, LocalGrid, LocalGridParams, Odometry, OdometryParams,
     depth, lidar, local_grid, odometry,
@@ -76,6 +77,16 @@ pub fn standard_registry() -> Registry {
     .register::<LidarParams, _, _>(
         spec("lidar", Sense, "Reads TruePose, the map's RayGrid. Writes LidarScan.", data![], data![LidarScan]),
         lidar,
+    )
+    .register::<NoParams, _, _>(
+        spec(
+            "log_feed",
+            Sense,
+            "Reads LogFeed (recorded readings). Writes Odometry, LidarScan, TruePose (when logged).",
+            data![],
+            data![Odometry, LidarScan],
+        ),
+        log_feed,
     )
     .register::<LocalGridParams, _, _>(
         spec(

@@ -15,4 +15,4 @@ pub use paths::{relative_to_file, tidy};
 pub use registry::{ConfiguredSystem, RegisteredSystem, Registry, StepSlot, SystemSpec};
 pub use scene::{LoadedScene, MapSource, NamedMap, Scene, some_path};
 pub use schedule::{Pipeline, PipelineStep};
-pub use spawn::{MapName, NETWORK_RESOLUTION_M, spawn_scene};
+pub use spawn::{MapName, NETWORK_RESOLUTION_M, map_layers, spawn_scene};

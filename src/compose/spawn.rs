@@ -12,7 +12,7 @@ use crate::particles::{FilterHealth, NeedsInit, ParticleSet, PoseEstimate};
 use crate::sense::{DepthStrip, LidarScan, LocalGrid, Odometry, RayGrid};
 use crate::world::map::{DistanceField, NetworkMap, START_POSE_TRIES, TraversableMap};
 use crate::world::rng::stream;
-use crate::world::{OnMap, Pose2, PreviousPose, Robot, RobotId, RobotRngs, TruePose};
+use crate::world::{OccupancyMap, OnMap, Pose2, PreviousPose, Robot, RobotId, RobotRngs, TruePose};
 use bevy::prelude::*;
 use rand::Rng;
 
@@ -22,6 +22,18 @@ pub struct MapName(pub String);
 
 /// Filter map resolution, metres (reference: 0.1 m cells for PF-net).
 pub const NETWORK_RESOLUTION_M: f32 = 0.1;
+
+/// What the sensors, filters and policies read from a map entity: the grid itself, its distance
+/// field, ray grid, the networks' coarser grid and the cells a robot of the scene's radius fits in.
+pub fn map_layers(map: &OccupancyMap, traversable: TraversableMap) -> impl Bundle {
+    (
+        NetworkMap::from_fine(map, NETWORK_RESOLUTION_M),
+        DistanceField::build(map),
+        RayGrid::from_map(map),
+        traversable,
+        map.clone(),
+    )
+}
 
 /// Inserts the scene's world resources and spawns its maps and robots; returns the robots in
 /// spawn order, which is their `RobotId` order. Each robot's random streams are keyed by (seed,
@@ -52,17 +64,7 @@ pub fn spawn_scene(world: &mut World, loaded: &LoadedScene) -> Result<Vec<Entity
             let body = physics.add_robot(start, scene.robot.radius_m, scene.robots_collide);
             new_robots.push((start, body, rngs));
         }
-        let map_entity = world
-            .spawn((
-                MapName(name.clone()),
-                NetworkMap::from_fine(map, NETWORK_RESOLUTION_M),
-                DistanceField::build(map),
-                RayGrid::from_map(map),
-                traversable,
-                physics,
-                map.clone(),
-            ))
-            .id();
+        let map_entity = world.spawn((MapName(name.clone()), map_layers(map, traversable), physics)).id();
         for (start, body, rngs) in new_robots {
             let id = RobotId(robots.len() as u32);
             let robot = world

@@ -99,6 +99,11 @@ impl InitParams {
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct NeedsInit;
 
+/// A start pose someone told the filter (like AMCL's initial pose): `init_particles` draws around
+/// it as it is, instead of around the true pose perturbed as the task prescribes.
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+pub struct StartGuess(pub Pose2);
+
 /// A freshly drawn set, with what the draw was centred on.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Initialised {
@@ -203,9 +208,9 @@ fn tracking_sigmas(params: &InitParams) -> (f32, f32) {
     (params.tracking_sigma_m.abs(), params.tracking_sigma_deg.abs().to_radians())
 }
 
-/// Reads NeedsInit, TruePose, OnMap → the map's OccupancyMap + TraversableMap, InitParams. Writes
-/// the ParticleSets of robots marked NeedsInit (and removes the mark), FilterRng,
-/// FilterHealth.reinitialisations (semi-global fell back to global) and FilterHealth.emptied (an
+/// Reads NeedsInit, TruePose (or StartGuess), OnMap → the map's OccupancyMap + TraversableMap,
+/// InitParams. Writes the ParticleSets of robots marked NeedsInit (and removes the mark),
+/// FilterRng, FilterHealth.reinitialisations (semi-global fell back to global) and FilterHealth.emptied (an
 /// unmarked set found empty, left so).
 pub fn init_particles(
     params: Res<InitParams>,
@@ -213,11 +218,11 @@ pub fn init_particles(
     mut commands: Commands,
     mut robots: Query<(
         (Entity, Has<NeedsInit>),
-        (&TruePose, &OnMap),
+        (&TruePose, Option<&StartGuess>, &OnMap),
         (&mut ParticleSet, &mut FilterRng, &mut FilterHealth),
     )>,
 ) {
-    for ((robot, needs_init), (truth, on_map), (mut set, mut rng, mut health)) in &mut robots {
+    for ((robot, needs_init), (truth, told, on_map), (mut set, mut rng, mut health)) in &mut robots {
         if !needs_init {
             if set.is_empty() {
                 health.emptied += 1;
@@ -231,7 +236,11 @@ pub fn init_particles(
             tracing::warn!("init_particles: map {:?} has no OccupancyMap + TraversableMap", on_map.0);
             continue;
         };
-        match draw_initial_set(&params, &truth.0, map, traversable, &mut rng.0) {
+        let drawn = match told {
+            Some(guess) => draw_around_guess(&params, Some(guess.0), map, traversable, &mut rng.0),
+            None => draw_initial_set(&params, &truth.0, map, traversable, &mut rng.0),
+        };
+        match drawn {
             Ok(init) => {
                 health.reinitialisations += u32::from(init.fell_back_to_global);
                 *set = init.set;
@@ -245,6 +254,7 @@ pub fn init_particles(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::particles::estimate_pose;
     use crate::testing::tiny_room;
     use crate::world::Cell;
     use crate::world::rng::stream;
@@ -294,6 +304,36 @@ mod tests {
         assert_eq!(world.get::<ParticleSet>(running), Some(&kept), "unmarked sets are left alone");
         world.run_system_once(init_particles).expect("init_particles runs");
         assert_eq!(world.get::<ParticleSet>(marked), Some(&filled), "drawn once per mark");
+    }
+
+    #[test]
+    fn init_particles_draws_around_a_told_start_as_it_is() {
+        let mut world = World::new();
+        world.insert_resource(InitParams { tracking_sigma_m: 0.05, ..Default::default() });
+        let map = tiny_room();
+        let traversable = free_cells(&map);
+        let m = world.spawn((map, traversable)).id();
+        let (truth, told) = (Pose2::new(0.5, 0.5, 0.0), Pose2::new(1.5, 0.5, 0.0));
+        let spawn = |world: &mut World, seed| {
+            world
+                .spawn((
+                    TruePose(truth),
+                    OnMap(m),
+                    ParticleSet::default(),
+                    FilterRng::seeded(seed),
+                    NeedsInit,
+                ))
+                .id()
+        };
+        let guessed = spawn(&mut world, 1);
+        world.entity_mut(guessed).insert(StartGuess(told));
+        let simulated = spawn(&mut world, 1);
+        world.run_system_once(init_particles).expect("init_particles runs");
+        let mean = |robot| estimate_pose(world.get::<ParticleSet>(robot).expect("set")).expect("drawn").pose;
+        // σ 0.05 m: 300 draws average within 1 cm of their centre; the perturbed truth (σ 0.05 m
+        // per axis) lies anywhere within ~15 cm of it.
+        assert!(mean(guessed).distance(&told) < 0.02, "centred on the told start: {:?}", mean(guessed));
+        assert!(mean(simulated).distance(&truth) < 0.3, "centred near the truth: {:?}", mean(simulated));
     }
 
     #[test]

@@ -21,7 +21,7 @@ pub use beam_model::{
 };
 pub use estimate::{PoseEstimate, estimate, estimate_pose};
 pub use init::{
-    InitParams, Initialised, NeedsInit, Task, draw_around_guess, draw_initial_set, init_particles,
+    InitParams, Initialised, NeedsInit, StartGuess, Task, draw_around_guess, draw_initial_set, init_particles,
 };
 pub use kld::{KldHistogram, KldParams};
 pub use likelihood_field::{

@@ -40,6 +40,10 @@ pub enum ReplayError {
     #[error("parameter `{field}` out of range: expected {expected}")]
     InvalidParam { field: &'static str, expected: &'static str },
 
+    /// The filter's schedule does not build (e.g. a PF-net checkpoint that does not load).
+    #[error("{0}")]
+    Schedule(String),
+
     /// The map cannot carry a filter (e.g. no traversable space for the robot radius).
     #[error(transparent)]
     Map(#[from] MapError),

@@ -1,7 +1,8 @@
-//! The classical particle filter (MCL with the likelihood-field or the beam model) on logged data,
-//! without the simulator: a plain struct that owns the map layers, the particle set and its RNG,
-//! and runs the same kernels as the ECS systems, in the same order — transition → observation
-//! model → soft resampling → estimate.
+//! The particle filter on logged data: a small bevy `App` holding one map and one robot, fed one
+//! recorded reading per step by `log_feed` and running the simulator's own filter systems —
+//! `init_particles → transition → likelihood → resample → estimate`, with the likelihood of the
+//! likelihood field, the beam model or PF-net (after `local_grid`, which builds its 56×56 input
+//! from the scan). Nothing of the filter is written twice: what runs on simulated data runs here.
 //!
 //! ```no_run
 //! use apfn::replay::{InitialGuess, Localizer, LocalizerParams};
@@ -11,30 +12,34 @@
 //! let guess = InitialGuess::Pose(Pose2::new(2.0, 1.5, 0.0));
 //! let mut filter = Localizer::new(map, LocalizerParams::default(), guess, 7)?;
 //! for (odom_delta, scan) in scans() {
-//!     let estimate = filter.update(odom_delta, &scan); // motion since the previous scan
+//!     let estimate = filter.update(odom_delta, &scan); // motion since the previous scan (zero first)
 //!     println!("{:?}", estimate.pose);
 //! }
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
-//! Use [`Localizer::observe`] for the first scan (nothing has moved yet), [`Localizer::update`]
-//! after. Same map, params, guess, seed and inputs → identical estimates, on any thread count.
+//! Same map, params, guess, seed and inputs → identical estimates, on any thread count.
 
+use crate::compose::{Pipeline, map_layers, standard_registry};
 use crate::particles::{
-    BeamModelParams, FilterHealth, Guard, InitParams, LikelihoodFieldParams, ParticleSet, PoseEstimate,
-    ResampleParams, Task, TransitionParams, draw_around_guess, draw_initial_set, estimate_pose, propagate,
-    resample_with, should_resample, weigh_beam_model, weigh_likelihood_field,
+    BeamModelParams, FilterHealth, InitParams, LikelihoodFieldParams, NeedsInit, ParticleSet,
+    PfNetLikelihoodParams, PoseEstimate, ResampleParams, StartGuess, Task, TransitionParams, estimate,
+    init_particles,
 };
+use crate::plugin::ApfnPlugin;
 use crate::replay::error::ReplayError;
+use crate::replay::feed::{LogFeed, Reading};
 use crate::replay::fit::scan_fit;
 use crate::replay::log::{EstimateLine, LogLine};
-use crate::sense::{LidarScan, RayGrid};
+use crate::sense::{LidarScan, LocalGrid, Odometry};
 use crate::world::map::{DistanceField, TraversableMap};
 use crate::world::rng::stream;
-use crate::world::{OccupancyMap, Pose2, RobotParams};
+use crate::world::{OccupancyMap, OnMap, Pose2, Robot, RobotId, RobotParams, RobotRngs, TruePose};
+use bevy::ecs::system::RunSystemOnce;
+use bevy::prelude::*;
 use rand::Rng;
-use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
+use std::path::Path;
 use std::time::Instant;
 
 /// Everything the filter is configured by; defaults are the ECS systems' defaults.
@@ -51,6 +56,8 @@ pub struct LocalizerParams {
     pub likelihood_field: LikelihoodFieldParams,
     /// AMCL's beam model (used when `model` is `beam`).
     pub beam_model: BeamModelParams,
+    /// PF-net's learned model (used when `model` is `pfnet`; default: the shipped checkpoint).
+    pub pfnet: PfNetLikelihoodParams,
     /// Soft resampling (α) and its ESS policy.
     pub resample: ResampleParams,
     /// Robot radius used to erode free space into the traversable map, metres (default: the
@@ -66,14 +73,21 @@ impl Default for LocalizerParams {
             model: ReplayModel::default(),
             likelihood_field: LikelihoodFieldParams::default(),
             beam_model: BeamModelParams::default(),
+            pfnet: PfNetLikelihoodParams {
+                checkpoint: Some(SHIPPED_PFNET.into()),
+                ..PfNetLikelihoodParams::default()
+            },
             resample: ResampleParams::default(),
             robot_radius_m: RobotParams::default().radius_m,
         }
     }
 }
 
-/// The observation models the replay filter offers, as nav2's AMCL does (`laser_model_type`).
-/// Spelled `likelihood_field` and `beam` in RON, JSON and on the command line.
+/// The shipped PF-net checkpoint, relative to the working directory (the repository's root).
+pub const SHIPPED_PFNET: &str = "models/pfnet_compact.safetensors";
+
+/// The observation models the replay filter offers: AMCL's two (`laser_model_type`) and PF-net.
+/// Spelled `likelihood_field`, `beam` and `pfnet` in RON, JSON and on the command line.
 #[derive(Serialize, Deserialize, clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 #[value(rename_all = "snake_case")]
@@ -83,6 +97,8 @@ pub enum ReplayModel {
     LikelihoodField,
     /// One ray cast per beam, scoring the measured range against the expected one.
     Beam,
+    /// The learned observation model of the paper, on the 56×56 occupancy grid of the scan.
+    Pfnet,
 }
 
 impl LocalizerParams {
@@ -118,28 +134,46 @@ pub enum InitialGuess {
     Unknown,
 }
 
+impl LocalizerParams {
+    /// The filter as a schedule file would spell it: `log_feed` where the simulator senses, then
+    /// the simulator's filter systems with these parameters.
+    pub fn schedule(&self) -> String {
+        fn ron(params: &impl Serialize) -> String {
+            ron::to_string(params).expect("filter parameters are plain data and serialise")
+        }
+        let (grid, likelihood) = match self.model {
+            ReplayModel::LikelihoodField => {
+                ("", format!("(\"mcl_likelihood_field\", {})", ron(&self.likelihood_field)))
+            }
+            ReplayModel::Beam => ("", format!("(\"mcl_beam_model\", {})", ron(&self.beam_model))),
+            ReplayModel::Pfnet => {
+                ("(\"local_grid\", ()),", format!("(\"pfnet_likelihood\", {})", ron(&self.pfnet)))
+            }
+        };
+        format!(
+            "Schedule(steps: [(\"log_feed\", ()), {grid} (\"init_particles\", {}), (\"transition\", {}), \
+             {likelihood}, (\"resample\", {}), (\"estimate\", ())])",
+            ron(&self.init),
+            ron(&self.transition),
+            ron(&self.resample)
+        )
+    }
+}
+
 /// A particle filter over one map, fed one scan at a time.
 pub struct Localizer {
-    map: OccupancyMap,
-    field: DistanceField,
-    /// Built only for the beam model, which ray-casts through it.
-    rays: Option<RayGrid>,
-    traversable: TraversableMap,
-    set: ParticleSet,
+    app: App,
+    robot: Entity,
+    map: Entity,
     params: LocalizerParams,
-    rng: Pcg64Mcg,
-    health: FilterHealth,
-    estimate: PoseEstimate,
-    /// What the initial set was drawn around (`None`: uniform over the map).
-    start_centre: Option<Pose2>,
-    fell_back_to_global: bool,
 }
 
 impl Localizer {
-    /// Builds the map layers and draws the initial set for `params.init.task` from `init`.
-    /// Errors on invalid params, a map without traversable space, or a tracking / semi-global
-    /// task with [`InitialGuess::Unknown`]. A semi-global box without a traversable cell falls back
-    /// to a global draw ([`Localizer::fell_back_to_global`] tells).
+    /// Builds the map layers and the filter's schedule, and draws the initial set for
+    /// `params.init.task` from `init` (with `init_particles`, as the first step would). Errors on
+    /// invalid params, a checkpoint that does not load, a map without traversable space, or a
+    /// tracking / semi-global task with [`InitialGuess::Unknown`]. A semi-global box without a
+    /// traversable cell falls back to a global draw ([`Localizer::fell_back_to_global`] tells).
     pub fn new(
         map: OccupancyMap,
         params: LocalizerParams,
@@ -147,87 +181,66 @@ impl Localizer {
         seed: u64,
     ) -> Result<Self, ReplayError> {
         params.validate()?;
-        let traversable = TraversableMap::build(&map, params.robot_radius_m)?;
-        let field = DistanceField::build(&map);
-        let rays = (params.model == ReplayModel::Beam).then(|| RayGrid::from_map(&map));
-        let mut rng = stream(&[seed]);
         let task = params.init.task;
-        let drawn = match (task, init) {
-            (Task::Global, _) => draw_around_guess(&params.init, None, &map, &traversable, &mut rng)?,
-            (_, InitialGuess::Unknown) => return Err(ReplayError::NoInitialPose { task }),
-            (_, InitialGuess::PerturbedTruth(truth)) => {
-                draw_initial_set(&params.init, &truth, &map, &traversable, &mut rng)?
-            }
-            (_, InitialGuess::Pose(guess)) => {
-                draw_around_guess(&params.init, Some(guess), &map, &traversable, &mut rng)?
-            }
+        if task != Task::Global && init == InitialGuess::Unknown {
+            return Err(ReplayError::NoInitialPose { task });
+        }
+        let traversable = TraversableMap::build(&map, params.robot_radius_m)?;
+        let pipeline =
+            Pipeline::parse(&params.schedule(), Path::new("the localize flags"), &standard_registry())
+                .map_err(|e| ReplayError::Schedule(e.to_string()))?;
+        let mut app = App::new();
+        app.add_plugins(ApfnPlugin { pipeline });
+        let world = app.world_mut();
+        let map = world.spawn(map_layers(&map, traversable)).id();
+        let start = match init {
+            InitialGuess::Pose(pose) | InitialGuess::PerturbedTruth(pose) => pose,
+            InitialGuess::Unknown => Pose2::default(),
         };
-        let (set, start_centre, fell_back_to_global) = (drawn.set, drawn.guess, drawn.fell_back_to_global);
-        let estimate = estimate_pose(&set).unwrap_or_default();
-        let health = FilterHealth { reinitialisations: u32::from(fell_back_to_global), ..Default::default() };
-        Ok(Self {
-            map,
-            field,
-            rays,
-            traversable,
-            set,
-            params,
-            rng,
-            health,
-            estimate,
-            start_centre,
-            fell_back_to_global,
-        })
+        let rngs = RobotRngs::seeded(stream(&[seed]).random());
+        let robot = world
+            .spawn((
+                (Robot, RobotId(0), TruePose(start), OnMap(map), rngs),
+                (LogFeed::default(), Odometry::default(), LidarScan::default(), LocalGrid::default()),
+                (ParticleSet::default(), NeedsInit),
+            ))
+            .id();
+        if let InitialGuess::Pose(pose) = init {
+            world.entity_mut(robot).insert(StartGuess(pose));
+        }
+        world.run_system_once(init_particles).expect("the schedule inserted InitParams");
+        world.run_system_once(estimate).expect("estimate needs no resource");
+        // Particles are validated above and the traversable map is not empty, so the draw succeeded.
+        debug_assert!(world.get::<NeedsInit>(robot).is_none(), "the initial set was drawn");
+        Ok(Self { app, robot, map, params })
     }
 
     /// One filter step: moves every particle by `odom_delta` (the odometry motion since the
-    /// previous scan, in the previous robot frame, as `prev.between(&curr)` gives) plus noise,
-    /// then [`observe`](Self::observe)s `scan`.
+    /// previous scan, in the previous robot frame, as `prev.between(&curr)` gives; zero for the
+    /// first scan) plus the transition noise, weighs them by `scan`, resamples when the ESS policy
+    /// fires, and returns the new estimate.
     pub fn update(&mut self, odom_delta: Pose2, scan: &LidarScan) -> PoseEstimate {
-        let key: u64 = self.rng.random();
-        propagate(&mut self.set, &odom_delta, &self.params.transition, key);
-        self.observe(scan)
+        self.step(Reading { odom_delta, scan: scan.clone(), truth: None })
     }
 
-    /// The observation half of a step, without motion (for the first scan): weighs the particles
-    /// by the chosen model (each skips or maps unusable readings its own way), resamples when the
-    /// ESS policy fires, and returns the new estimate.
-    pub fn observe(&mut self, scan: &LidarScan) -> PoseEstimate {
-        let weighed = match &self.rays {
-            Some(rays) => weigh_beam_model(&mut self.set, scan, rays, &self.params.beam_model),
-            None => {
-                let lf = &self.params.likelihood_field;
-                weigh_likelihood_field(&mut self.set, scan, &self.field, &self.map.origin, lf)
-            }
-        };
-        match weighed {
-            Ok((Guard::ResetToUniform, _)) => self.health.degeneracies += 1,
-            Ok(_) => {}
-            // The layers are built from the map in `new`; what remains is a scan with a bad
-            // range_max, which the beam model refuses.
-            Err(e) => tracing::warn!("replay localizer: {e}"),
-        }
-        if should_resample(&self.set, self.params.resample.ess_threshold) {
-            resample_with(&mut self.set, &self.params.resample, &mut self.rng);
-        }
-        if let Some(estimate) = estimate_pose(&self.set) {
-            self.estimate = estimate;
-        }
-        self.estimate
+    fn step(&mut self, reading: Reading) -> PoseEstimate {
+        self.app
+            .world_mut()
+            .get_mut::<LogFeed>(self.robot)
+            .expect("the robot has a feed")
+            .0
+            .push_back(reading);
+        self.app.update();
+        self.estimate()
     }
 
-    /// Runs the whole log: [`observe`](Self::observe) on the first line, [`update`](Self::update)
-    /// with the odometry motion between consecutive lines after. `after_line` is called once per
-    /// line (for progress bars).
+    /// Runs the whole log, one [`update`](Self::update) per line with the odometry motion since
+    /// the previous line. `after_line` is called once per line (for progress bars).
     pub fn replay(&mut self, lines: &[LogLine], mut after_line: impl FnMut()) -> Vec<EstimateLine> {
         let mut out = Vec::with_capacity(lines.len());
         for (k, line) in lines.iter().enumerate() {
             let started = Instant::now();
-            let scan = line.scan();
-            let estimate = match k.checked_sub(1).map(|p| &lines[p]) {
-                None => self.observe(&scan),
-                Some(previous) => self.update(previous.odom_pose().between(&line.odom_pose()), &scan),
-            };
+            let estimate = self.step(Reading::from_line(k.checked_sub(1).map(|p| &lines[p]), line));
             let update_ms = started.elapsed().as_secs_f64() * 1e3;
             let (p, c) = (estimate.pose, estimate.cov);
             let cov = [c[0][0], c[0][1], c[0][2], c[1][0], c[1][1], c[1][2], c[2][0], c[2][1], c[2][2]];
@@ -239,45 +252,43 @@ impl Localizer {
 
     /// The latest estimate (that of the initial set before any scan).
     pub fn estimate(&self) -> PoseEstimate {
-        self.estimate
+        *self.robot_part::<PoseEstimate>()
     }
 
     /// The particle set.
     pub fn particles(&self) -> &ParticleSet {
-        &self.set
+        self.robot_part()
     }
 
     /// Guard events so far: weights reset to uniform, and semi-global draws that fell back to global.
     pub fn health(&self) -> FilterHealth {
-        self.health
-    }
-
-    /// The pose the initial set was drawn around (for a perturbed truth, after the perturbation);
-    /// `None` for a draw over the whole map.
-    pub fn start_centre(&self) -> Option<Pose2> {
-        self.start_centre
+        *self.robot_part::<FilterHealth>()
     }
 
     /// Whether the semi-global box held no traversable cell and the set was drawn globally.
     pub fn fell_back_to_global(&self) -> bool {
-        self.fell_back_to_global
+        self.health().reinitialisations > 0
     }
 
     pub fn map(&self) -> &OccupancyMap {
-        &self.map
+        self.map_part()
     }
 
     /// How well `scan` fits the map seen from `pose` ([`scan_fit`]).
     pub fn scan_fit(&self, scan: &LidarScan, pose: &Pose2) -> Option<f32> {
-        scan_fit(scan, pose, &self.map, &self.field)
-    }
-
-    pub fn traversable(&self) -> &TraversableMap {
-        &self.traversable
+        scan_fit(scan, pose, self.map(), self.map_part::<DistanceField>())
     }
 
     pub fn params(&self) -> &LocalizerParams {
         &self.params
+    }
+
+    fn robot_part<C: Component>(&self) -> &C {
+        self.app.world().get::<C>(self.robot).expect("the robot was spawned with its filter parts")
+    }
+
+    fn map_part<C: Component>(&self) -> &C {
+        self.app.world().get::<C>(self.map).expect("the map was spawned with its layers")
     }
 }
 
@@ -318,7 +329,7 @@ mod tests {
             let mut filter = Localizer::new(map.clone(), params, start, 2).expect("filter");
             let before = filter.estimate().pose.distance(&truth);
             let scan = scan_at(&map, truth);
-            let mut estimate = filter.observe(&scan);
+            let mut estimate = filter.update(Pose2::default(), &scan);
             for _ in 0..5 {
                 estimate = filter.update(Pose2::default(), &scan);
             }
