@@ -6,9 +6,7 @@
 //! `cargo bench --bench sac -- --warm-up-time 1 --measurement-time 5`
 
 use apfn::compose::{Pipeline, Scene, standard_registry};
-use apfn::nn::sac::{
-    ACTION_LEN, Observations, STATE_LEN, SacHyper, SacLearner, SacNetConfig, SacNetworks, Transitions,
-};
+use apfn::nn::sac::{ACTION_LEN, Observations, SacHyper, SacLearner, SacNetConfig, SacNetworks, Transitions};
 use apfn::plugin::headless_app;
 use apfn::world::map::procedural::Split;
 use apfn::world::rng::stream;
@@ -26,7 +24,7 @@ fn update(c: &mut Criterion) {
         let mut uniform = |len: usize| (0..len).map(|_| rng.random::<f32>()).collect::<Vec<f32>>();
         let (bl, gl) = (config.belief_channels * config.belief_cells.pow(2), config.grid_cells.pow(2));
         let images = [uniform(n * bl), uniform(n * gl), uniform(n * bl), uniform(n * gl)];
-        let states = [uniform(n * STATE_LEN), uniform(n * STATE_LEN)];
+        let states = [uniform(n * config.state_len()), uniform(n * config.state_len())];
         let (actions, rewards, dones) = (uniform(n * ACTION_LEN), uniform(n), vec![0.0; n]);
         let noise = uniform(2 * n * ACTION_LEN);
         let obs = |i: usize| Observations {

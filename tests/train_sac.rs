@@ -17,6 +17,7 @@ fn config(dir: &Path) -> (TrainSacConfig, PathBuf) {
         scene,
         systems: repo.join("systems/apfn.ron"),
         network: "compact".into(),
+        depth_columns: 0,
         agent: apfn::agent::sac::SacAgentConfig {
             buffer: 64,
             batch: 8,
@@ -69,4 +70,38 @@ fn resumed_training_writes_the_same_checkpoint() {
         .filter(|e| e.file_name().to_string_lossy().starts_with("replay_"))
         .collect();
     assert_eq!(replays.len(), 1, "older replay buffers are removed once a newer state names its own");
+}
+
+#[test]
+fn a_depth_reading_agent_trains_on_the_strip_the_depth_step_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut config, _) = config(dir.path());
+    let lidar_only = std::fs::read_to_string(&config.systems).unwrap();
+    let with_depth = lidar_only.replacen(
+        "(\"lidar\",                ()),",
+        "(\"lidar\", ()), (\"depth\", (columns: 8)),",
+        1,
+    );
+    assert_ne!(with_depth, lidar_only, "systems/apfn.ron lists the lidar step as expected");
+    config.systems = dir.path().join("apfn_depth.ron");
+    std::fs::write(&config.systems, with_depth).unwrap();
+    config.depth_columns = 8;
+    let path = dir.path().join("train_depth.ron");
+    std::fs::write(&path, ron::to_string(&config).unwrap()).unwrap();
+
+    let mut trainer = SacTrainer::new(config, &path).unwrap();
+    while trainer.step < 12 {
+        trainer.step();
+    }
+    let agent = trainer.agent();
+    assert!(agent.updates > 0, "the run must have trained");
+    assert_eq!(agent.learner.nets.config.depth_columns, 8);
+    let mut batch = apfn::agent::sac::SampledBatch::default();
+    agent.replay.sample(&[0, 1], &mut batch);
+    let state = batch.transitions().obs.state;
+    assert_eq!(state.len(), 2 * (4 + 8), "robot state ⊕ 8 depth columns per observation");
+    assert!(
+        state[4..12].iter().all(|d| (0.0..=1.0).contains(d)) && state[4..12].iter().any(|&d| d > 0.0),
+        "{state:?}"
+    );
 }

@@ -4,7 +4,7 @@
 use crate::cli::pfnet::{median, peak_rss_mb, round, time};
 use crate::cli::set_threads;
 use crate::nn::sac::{
-    ACTION_LEN, Observations, STATE_LEN, SacHyper, SacLearner, SacNetConfig, SacNetworks, Transitions,
+    ACTION_LEN, Observations, SacHyper, SacLearner, SacNetConfig, SacNetworks, Transitions,
 };
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
@@ -72,7 +72,7 @@ fn bench(config: &str, n: usize, reps: usize, threads: Option<usize>) -> anyhow:
     let mut uniform = |len: usize, lo: f32| (0..len).map(|_| rng.random_range(lo..1.0)).collect::<Vec<f32>>();
     let (bl, gl) = (c.belief_channels * c.belief_cells * c.belief_cells, c.grid_cells * c.grid_cells);
     let images = [uniform(n * bl, 0.0), uniform(n * gl, 0.0), uniform(n * bl, 0.0), uniform(n * gl, 0.0)];
-    let states = [uniform(n * STATE_LEN, 0.0), uniform(n * STATE_LEN, 0.0)];
+    let states = [uniform(n * c.state_len(), 0.0), uniform(n * c.state_len(), 0.0)];
     let (actions, rewards, dones) = (uniform(n * ACTION_LEN, -1.0), uniform(n, -1.0), vec![0.0; n]);
     let noise: Vec<f32> = (0..2 * n * ACTION_LEN).map(|_| rng.sample(StandardNormal)).collect();
     let obs =

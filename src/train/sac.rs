@@ -34,6 +34,10 @@ pub struct TrainSacConfig {
     pub systems: PathBuf,
     /// `paper` or `compact`.
     pub network: String,
+    /// Columns of the depth strip the agent reads beside its images (0: none, as the paper); the
+    /// schedule must then run the `depth` step with as many `columns`.
+    #[serde(default)]
+    pub depth_columns: usize,
     #[serde(default)]
     pub agent: SacAgentConfig,
     /// World steps to train for (each moves every robot once).
@@ -47,11 +51,15 @@ pub struct TrainSacConfig {
 
 impl TrainSacConfig {
     pub fn net_config(&self) -> Result<SacNetConfig, String> {
-        match self.network.as_str() {
-            "paper" => Ok(SacNetConfig::paper()),
-            "compact" => Ok(SacNetConfig::compact()),
-            other => Err(format!("network: expected `paper` or `compact`, found `{other}`")),
+        let named = match self.network.as_str() {
+            "paper" => SacNetConfig::paper(),
+            "compact" => SacNetConfig::compact(),
+            other => return Err(format!("network: expected `paper` or `compact`, found `{other}`")),
+        };
+        if self.depth_columns > 0 {
+            crate::limits::DEPTH_COLUMNS.check("depth_columns", self.depth_columns)?;
         }
+        Ok(SacNetConfig { depth_columns: self.depth_columns, ..named })
     }
 
     pub fn check(&self) -> Result<(), String> {

@@ -1,5 +1,5 @@
 //! What the agent sees, stored as bytes: the belief crops and the LiDAR grid quantised to u8,
-//! the robot state as four floats. The policy acts on exactly the bytes the replay buffer keeps,
+//! the robot state as four floats (and, when the network reads one, the depth strip after it). The policy acts on exactly the bytes the replay buffer keeps,
 //! so what it learns from is what it saw.
 //!
 //! Belief channels are rescaled so that one byte each keeps what matters: free space as is;
@@ -11,7 +11,7 @@ use crate::agent::Action;
 use crate::belief::{BELIEF_CHANNELS, BeliefCrop};
 use crate::episode::Episode;
 use crate::nn::sac::{STATE_LEN, SacNetConfig};
-use crate::sense::LocalGrid;
+use crate::sense::{DepthParams, DepthStrip, LocalGrid};
 
 /// Decades of Σ w the log scale spans: weights below 10⁻⁴ read as an empty cell.
 const WEIGHT_DECADES: f32 = 4.0;
@@ -22,6 +22,7 @@ pub struct ObservationShape {
     pub belief_cells: usize,
     pub belief_channels: usize,
     pub grid_cells: usize,
+    pub depth_columns: usize,
 }
 
 impl ObservationShape {
@@ -30,7 +31,13 @@ impl ObservationShape {
             belief_cells: config.belief_cells,
             belief_channels: config.belief_channels,
             grid_cells: config.grid_cells,
+            depth_columns: config.depth_columns,
         }
+    }
+
+    /// Floats of the vector input: the robot state, then the depth strip.
+    pub fn state_len(&self) -> usize {
+        STATE_LEN + self.depth_columns
     }
 
     pub fn belief_len(&self) -> usize {
@@ -97,6 +104,34 @@ pub fn robot_state(last_action: &Action, collided: bool, episode: &Episode, step
     [last_action.linear, last_action.angular, f32::from(u8::from(collided)), left]
 }
 
+/// The depth strip as network input, depth / `params.max_m` in [0, 1], into `out`
+/// (`shape.depth_columns` values). `Err` names what to schedule or set when the strip is missing
+/// or of another width.
+pub fn encode_depth(
+    strip: Option<&DepthStrip>,
+    params: Option<&DepthParams>,
+    shape: &ObservationShape,
+    out: &mut [f32],
+) -> Result<(), String> {
+    let n = shape.depth_columns;
+    if n == 0 {
+        return Ok(());
+    }
+    let (Some(strip), Some(params)) = (strip, params) else {
+        return Err(format!(
+            "the policy reads a depth strip of {n} columns; schedule the `depth` step (columns: {n}) before it"
+        ));
+    };
+    if strip.depths_m.len() != n {
+        return Err(format!(
+            "depth strip: expected {n} columns (the network's input), got {}; set depth's `columns`",
+            strip.depths_m.len()
+        ));
+    }
+    out.iter_mut().zip(&strip.depths_m).for_each(|(v, &d)| *v = (d / params.max_m).clamp(0.0, 1.0));
+    Ok(())
+}
+
 /// Bytes back to network inputs in [0, 1].
 pub fn decode(bytes: &[u8], out: &mut [f32]) {
     out.iter_mut().zip(bytes).for_each(|(v, &b)| *v = f32::from(b) / 255.0);
@@ -108,7 +143,7 @@ mod tests {
 
     #[test]
     fn belief_bytes_keep_free_space_log_weight_and_mean_heading() {
-        let shape = ObservationShape { belief_cells: 2, belief_channels: 4, grid_cells: 2 };
+        let shape = ObservationShape { belief_cells: 2, belief_channels: 4, grid_cells: 2, depth_columns: 0 };
         let mut values = vec![0.0; 16];
         values[..4].copy_from_slice(&[1.0, 0.0, 0.5, 1.0]); // free
         values[4..8].copy_from_slice(&[1.0, 1e-2, 0.0, 1e-6]); // Σ w
@@ -130,5 +165,22 @@ mod tests {
         let a = Action::new(0.5, -1.0);
         assert_eq!(robot_state(&a, true, &Episode { index: 3, step: 1 }, 50), [0.5, -1.0, 1.0, 0.98]);
         assert_eq!(robot_state(&a, false, &Episode { index: 3, step: 50 }, 50)[3], 0.0, "no action left");
+    }
+
+    #[test]
+    fn depth_input_is_depth_over_range_and_its_absence_names_the_step() {
+        let shape = ObservationShape { belief_cells: 2, belief_channels: 4, grid_cells: 2, depth_columns: 3 };
+        let params = DepthParams { columns: 3, max_m: 4.0, ..Default::default() };
+        let strip = DepthStrip { depths_m: vec![0.1, 2.0, 4.0] };
+        let mut out = [9.0; 3];
+        encode_depth(Some(&strip), Some(&params), &shape, &mut out).unwrap();
+        assert_eq!(out, [0.025, 0.5, 1.0]);
+        let err = encode_depth(None, None, &shape, &mut out).unwrap_err();
+        assert!(err.contains("`depth` step") && err.contains("columns: 3"), "{err}");
+        let wide = DepthStrip { depths_m: vec![1.0; 56] };
+        let err = encode_depth(Some(&wide), Some(&params), &shape, &mut out).unwrap_err();
+        assert!(err.contains("expected 3 columns") && err.contains("got 56"), "{err}");
+        let lidar_only = ObservationShape { depth_columns: 0, ..shape };
+        assert_eq!(encode_depth(None, None, &lidar_only, &mut []), Ok(()), "no depth input, nothing needed");
     }
 }

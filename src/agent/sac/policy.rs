@@ -5,13 +5,15 @@
 use crate::act::Collided;
 use crate::agent::Action;
 use crate::agent::sac::learner::{EpisodeReturn, Pending, SacAgent};
-use crate::agent::sac::observation::{ObservationShape, decode, encode_belief, encode_grid, robot_state};
+use crate::agent::sac::observation::{
+    ObservationShape, decode, encode_belief, encode_depth, encode_grid, robot_state,
+};
 use crate::agent::sac::reward::Reward;
 use crate::belief::BeliefCrop;
 use crate::episode::{Episode, EpisodeEnd, EpisodeParams};
 use crate::nn::sac::{ACTION_LEN, Observations, PolicyWorkspace, STATE_LEN, SacNetworks};
 use crate::params::StepParams;
-use crate::sense::LocalGrid;
+use crate::sense::{DepthParams, DepthStrip, LocalGrid};
 use crate::world::{RobotId, in_id_order};
 use bevy::prelude::*;
 use rand::Rng;
@@ -74,6 +76,7 @@ type RobotView<'a> = (
     (Entity, &'a RobotId),
     &'a BeliefCrop,
     &'a LocalGrid,
+    Option<&'a DepthStrip>,
     &'a Collided,
     &'a Episode,
     Has<EpisodeEnd>,
@@ -81,11 +84,13 @@ type RobotView<'a> = (
     &'a mut Action,
 );
 
-/// Reads BeliefCrop, LocalGrid, Collided, Episode, EpisodeEnd, Reward, the last Action, RobotId
-/// (the batch order), the learning agent (if any). Writes Action; with a learning agent, its replay buffer.
+/// Reads BeliefCrop, LocalGrid, DepthStrip (when the network reads one), Collided, Episode,
+/// EpisodeEnd, Reward, the last Action, RobotId (the batch order), the learning agent (if any).
+/// Writes Action; with a learning agent, its replay buffer.
 pub fn sac_policy(
     params: Res<SacPolicyParams>,
     episode: Res<EpisodeParams>,
+    depth_params: Option<Res<DepthParams>>,
     mut agents: Query<&mut SacAgent>,
     mut robots: Query<RobotView>,
     mut state: Local<PolicyState>,
@@ -110,15 +115,19 @@ pub fn sac_policy(
             .map_or_else(|| state.loaded.as_deref().expect("loaded above"), |a| &a.learner.nets);
         ObservationShape::of(&nets.config)
     };
-    let (bl, gl) = (shape.belief_len(), shape.grid_len());
+    let (bl, gl, sl) = (shape.belief_len(), shape.grid_len(), shape.state_len());
     state.belief_bytes.resize(n * bl, 0);
     state.grid_bytes.resize(n * gl, 0);
-    state.states.resize(n * STATE_LEN, 0.0);
+    state.states.resize(n * sl, 0.0);
     state.obs_ids.clear();
     for (k, &robot) in state.robots.iter().enumerate() {
-        let (_, crop, grid, collided, ep, is_end, reward, action) = robots.get(robot).expect("listed above");
+        let (_, crop, grid, depth, collided, ep, is_end, reward, action) =
+            robots.get(robot).expect("listed above");
+        let row = &mut state.states[k * sl..(k + 1) * sl];
+        row[..STATE_LEN].copy_from_slice(&robot_state(action, collided.0, ep, episode.steps));
         let encoded = encode_belief(crop, &shape, &mut state.belief_bytes[k * bl..(k + 1) * bl])
-            .and_then(|()| encode_grid(grid, &shape, &mut state.grid_bytes[k * gl..(k + 1) * gl]));
+            .and_then(|()| encode_grid(grid, &shape, &mut state.grid_bytes[k * gl..(k + 1) * gl]))
+            .and_then(|()| encode_depth(depth, depth_params.as_deref(), &shape, &mut row[STATE_LEN..]));
         if let Err(e) = encoded {
             if !state.warned {
                 tracing::error!("sac_policy: {e}");
@@ -126,12 +135,11 @@ pub fn sac_policy(
             }
             return;
         }
-        let s = robot_state(action, collided.0, ep, episode.steps);
-        state.states[k * STATE_LEN..(k + 1) * STATE_LEN].copy_from_slice(&s);
         if let Some(agent) = agent.as_deref_mut() {
             let (belief, grid) =
                 (&state.belief_bytes[k * bl..(k + 1) * bl], &state.grid_bytes[k * gl..(k + 1) * gl]);
-            state.obs_ids.push(store(agent, robot, belief, grid, &s, reward, is_end));
+            let s = &state.states[k * sl..(k + 1) * sl];
+            state.obs_ids.push(store(agent, robot, belief, grid, s, reward, is_end));
         }
     }
 
@@ -174,7 +182,7 @@ fn store(
     robot: Entity,
     belief: &[u8],
     grid: &[u8],
-    s: &[f32; STATE_LEN],
+    s: &[f32],
     reward: &Reward,
     is_end: bool,
 ) -> u64 {
@@ -212,6 +220,7 @@ mod tests {
             belief_cells: 5,
             belief_channels: 4,
             grid_cells: 5,
+            depth_columns: 0,
         }
     }
 
@@ -285,5 +294,36 @@ mod tests {
         assert_eq!(run(), run(), "evaluation actions are tanh(μ), no noise");
         let missing = SacPolicyParams { checkpoint: Some("no/such/policy.safetensors".into()) };
         assert!(missing.check().unwrap_err().contains("no/such/policy.safetensors"));
+    }
+
+    #[test]
+    fn a_depth_reading_agent_stores_the_strip_after_the_state_and_asks_for_the_depth_step() {
+        let config = SacNetConfig { depth_columns: 3, ..tiny() };
+        let agent_config =
+            SacAgentConfig { buffer: 10, batch: 1, learning_starts: 0, hyper: SacHyper::default() };
+        let mut world = World::new();
+        world.insert_resource(SacPolicyParams::default());
+        world.insert_resource(EpisodeParams { steps: 3, change_maps: false });
+        let agent = world.spawn(SacAgent::new(&config, agent_config, 1, 3, 7)).id();
+        let crop = BeliefCrop { cells: 5, centres: vec![], values: vec![0.5; 100] };
+        let robot = spawn_robot(&mut world, crop, LocalGrid { cells: 5, values: vec![1.0; 25] });
+        world.entity_mut(robot).insert(Episode { index: 0, step: 1 });
+        world.run_system_once(sac_policy).unwrap();
+        assert!(
+            world.get::<SacAgent>(agent).unwrap().pending.is_empty(),
+            "no strip: no action, nothing stored"
+        );
+
+        world.insert_resource(DepthParams { columns: 3, max_m: 2.0, ..Default::default() });
+        world.entity_mut(robot).insert(DepthStrip { depths_m: vec![0.5, 1.0, 2.0] });
+        world.run_system_once(sac_policy).unwrap();
+        world.entity_mut(robot).insert((Episode { index: 0, step: 2 }, Reward(Some(-0.5))));
+        world.run_system_once(sac_policy).unwrap();
+        let agent = world.get::<SacAgent>(agent).unwrap();
+        let mut batch = crate::agent::sac::SampledBatch::default();
+        agent.replay.sample(&[0], &mut batch);
+        let state = batch.transitions().obs.state;
+        assert_eq!(state.len(), STATE_LEN + 3);
+        assert_eq!(state[STATE_LEN..], [0.25, 0.5, 1.0], "depth / max_m after the robot state");
     }
 }

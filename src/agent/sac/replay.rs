@@ -4,7 +4,7 @@
 //! state ≈ 13.2 kB per observation, ≈ 0.67 GB for 50,000 transitions.
 
 use crate::agent::sac::observation::{ObservationShape, decode};
-use crate::nn::sac::{ACTION_LEN, Observations, STATE_LEN, Transitions};
+use crate::nn::sac::{ACTION_LEN, Observations, Transitions};
 use crate::world::map::write_atomically;
 use anyhow::Context;
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
@@ -72,7 +72,7 @@ impl ReplayBuffer {
             obs_written: 0,
             belief: vec![0; obs_capacity * shape.belief_len()],
             grid: vec![0; obs_capacity * shape.grid_len()],
-            state: vec![0.0; obs_capacity * STATE_LEN],
+            state: vec![0.0; obs_capacity * shape.state_len()],
             capacity,
             written: 0,
             obs: vec![0; capacity],
@@ -103,12 +103,13 @@ impl ReplayBuffer {
     }
 
     /// Stores an observation; returns its id for [`ReplayBuffer::push`].
-    pub fn push_observation(&mut self, belief: &[u8], grid: &[u8], state: &[f32; STATE_LEN]) -> u64 {
-        let (bl, gl) = (self.shape.belief_len(), self.shape.grid_len());
+    /// `state` is the robot state ⊕ depth strip (`shape.state_len()` floats).
+    pub fn push_observation(&mut self, belief: &[u8], grid: &[u8], state: &[f32]) -> u64 {
+        let (bl, gl, sl) = (self.shape.belief_len(), self.shape.grid_len(), self.shape.state_len());
         let slot = (self.obs_written % self.obs_capacity as u64) as usize;
         self.belief[slot * bl..(slot + 1) * bl].copy_from_slice(belief);
         self.grid[slot * gl..(slot + 1) * gl].copy_from_slice(grid);
-        self.state[slot * STATE_LEN..(slot + 1) * STATE_LEN].copy_from_slice(state);
+        self.state[slot * sl..(slot + 1) * sl].copy_from_slice(state);
         self.obs_written += 1;
         self.obs_written - 1
     }
@@ -127,11 +128,12 @@ impl ReplayBuffer {
     /// Decodes the transitions at ring positions `indices` (each `< len()`) into `out`.
     pub fn sample(&self, indices: &[usize], out: &mut SampledBatch) {
         let (bl, gl, n) = (self.shape.belief_len(), self.shape.grid_len(), indices.len());
+        let sl = self.shape.state_len();
         out.n = n;
         for (side, ids) in [&self.obs, &self.next_obs].into_iter().enumerate() {
             out.belief[side].resize(n * bl, 0.0);
             out.grid[side].resize(n * gl, 0.0);
-            out.state[side].resize(n * STATE_LEN, 0.0);
+            out.state[side].resize(n * sl, 0.0);
             for (k, &i) in indices.iter().enumerate() {
                 let id = ids[i];
                 assert!(
@@ -141,8 +143,8 @@ impl ReplayBuffer {
                 let slot = (id % self.obs_capacity as u64) as usize;
                 decode(&self.belief[slot * bl..(slot + 1) * bl], &mut out.belief[side][k * bl..(k + 1) * bl]);
                 decode(&self.grid[slot * gl..(slot + 1) * gl], &mut out.grid[side][k * gl..(k + 1) * gl]);
-                out.state[side][k * STATE_LEN..(k + 1) * STATE_LEN]
-                    .copy_from_slice(&self.state[slot * STATE_LEN..(slot + 1) * STATE_LEN]);
+                out.state[side][k * sl..(k + 1) * sl]
+                    .copy_from_slice(&self.state[slot * sl..(slot + 1) * sl]);
             }
         }
         out.actions.clear();
@@ -237,7 +239,7 @@ mod tests {
     use super::*;
 
     fn shape() -> ObservationShape {
-        ObservationShape { belief_cells: 1, belief_channels: 4, grid_cells: 1 }
+        ObservationShape { belief_cells: 1, belief_channels: 4, grid_cells: 1, depth_columns: 0 }
     }
 
     /// Stores observation `k` with every byte `k` and state `[k, 0, 0, 0]`.

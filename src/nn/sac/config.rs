@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 /// Robot state appended to the image features: v, ω, the collision flag, the fraction of the
-/// episode left.
+/// episode left (the depth strip, when the network reads one, follows it).
 pub const STATE_LEN: usize = 4;
 /// Normalised (linear, angular) velocity.
 pub const ACTION_LEN: usize = 2;
@@ -25,6 +25,10 @@ pub struct SacNetConfig {
     pub belief_channels: usize,
     /// Side of the LiDAR occupancy grid, cells.
     pub grid_cells: usize,
+    /// Columns of the depth strip appended to the robot state, each as depth / `max_m` (the
+    /// `depth` step's columns); 0: no depth input, as the paper's LiDAR agent.
+    #[serde(default)]
+    pub depth_columns: usize,
 }
 
 impl SacNetConfig {
@@ -37,6 +41,7 @@ impl SacNetConfig {
             belief_cells: 50,
             belief_channels: 4,
             grid_cells: 56,
+            depth_columns: 0,
         }
     }
 
@@ -46,9 +51,14 @@ impl SacNetConfig {
         Self { conv_channels: vec![16, 32, 32, 32], encoder_fc: 128, mlp_width: 256, ..Self::paper() }
     }
 
+    /// Length of the vector input: the robot state and the depth strip.
+    pub fn state_len(&self) -> usize {
+        STATE_LEN + self.depth_columns
+    }
+
     /// Length of the actor's and critics' input before the action: both encoders and the state.
     pub fn feature_len(&self) -> usize {
-        2 * self.encoder_fc + STATE_LEN
+        2 * self.encoder_fc + self.state_len()
     }
 
     /// `Err("field: expected …")` when the shapes cannot build a network.
@@ -92,5 +102,19 @@ mod tests {
         assert!(tiny.check().unwrap_err().starts_with("grid_cells:"), "{:?}", tiny.check());
         let empty = SacNetConfig { conv_channels: vec![], ..SacNetConfig::paper() };
         assert!(empty.check().unwrap_err().starts_with("conv_channels:"));
+    }
+
+    #[test]
+    fn a_config_written_before_depth_input_reads_as_lidar_only() {
+        let mut json = serde_json::to_value(SacNetConfig::compact()).expect("serialise");
+        json.as_object_mut().expect("an object").remove("depth_columns");
+        let read: SacNetConfig = serde_json::from_value(json).expect("the field is optional");
+        assert_eq!(read, SacNetConfig::compact());
+        let depth = SacNetConfig { depth_columns: 56, ..SacNetConfig::compact() };
+        assert_eq!(
+            depth.feature_len(),
+            SacNetConfig::compact().feature_len() + 56,
+            "depth follows the state"
+        );
     }
 }

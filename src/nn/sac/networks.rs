@@ -4,7 +4,7 @@
 //! gradient stopped (the DrQ / SAC-AE arrangement; see `update.rs` for why).
 
 use crate::nn::params::Params;
-use crate::nn::sac::config::{ACTION_LEN, STATE_LEN, SacNetConfig};
+use crate::nn::sac::config::{ACTION_LEN, SacNetConfig};
 use crate::nn::sac::encoder::{EncoderActivations, ImageEncoder};
 use crate::nn::sac::mlp::{Mlp, MlpActivations};
 use crate::nn::sac::tanh_gaussian::{self, HEAD_LEN};
@@ -16,7 +16,7 @@ use rayon::prelude::*;
 pub const ENCODER_CHUNK: usize = 32;
 
 /// A batch of observations as network inputs: belief crops `[n][channels][cells][cells]`, LiDAR
-/// grids `[n][1][cells][cells]`, robot states `[n][4]`.
+/// grids `[n][1][cells][cells]`, robot states ⊕ depth strips `[n][config.state_len()]`.
 #[derive(Clone, Copy, Debug)]
 pub struct Observations<'a> {
     pub n: usize,
@@ -102,7 +102,7 @@ impl SacNetworks {
         self.config.feature_len()
     }
 
-    /// `features` `[n][F]` = belief features ⊕ grid features ⊕ state, on weights `values`
+    /// `features` `[n][F]` = belief features ⊕ grid features ⊕ state (⊕ depth), on weights `values`
     /// (the online arena or the target copy).
     pub fn encode(
         &self,
@@ -111,9 +111,9 @@ impl SacNetworks {
         ws: &mut FeatureWorkspace,
         features: &mut Vec<f32>,
     ) {
-        let (n, f, fc) = (obs.n, self.feature_len(), self.config.encoder_fc);
+        let (n, f, fc, sl) = (obs.n, self.feature_len(), self.config.encoder_fc, self.config.state_len());
         let (bl, gl) = (self.belief.input_len(), self.grid.input_len());
-        assert!(obs.belief.len() == n * bl && obs.grid.len() == n * gl && obs.state.len() == n * STATE_LEN);
+        assert!(obs.belief.len() == n * bl && obs.grid.len() == n * gl && obs.state.len() == n * sl);
         ws.chunks.resize(n.div_ceil(ENCODER_CHUNK), ChunkActivations::default());
         features.resize(n * f, 0.0);
         features.par_chunks_mut(ENCODER_CHUNK * f).zip(ws.chunks.par_iter_mut()).enumerate().for_each(
@@ -124,8 +124,7 @@ impl SacNetworks {
                 for (k, row) in out.chunks_exact_mut(f).enumerate() {
                     row[..fc].copy_from_slice(&acts.belief.features[k * fc..(k + 1) * fc]);
                     row[fc..2 * fc].copy_from_slice(&acts.grid.features[k * fc..(k + 1) * fc]);
-                    row[2 * fc..]
-                        .copy_from_slice(&obs.state[(start + k) * STATE_LEN..(start + k + 1) * STATE_LEN]);
+                    row[2 * fc..].copy_from_slice(&obs.state[(start + k) * sl..(start + k + 1) * sl]);
                 }
             },
         );
@@ -214,12 +213,14 @@ mod tests {
             belief_cells: 11,
             belief_channels: 4,
             grid_cells: 9,
+            depth_columns: 3,
         };
         let nets = SacNetworks::new(&config, 1);
         let n = ENCODER_CHUNK + 3;
         let belief: Vec<f32> = test_values(n * 4 * 121, 2).iter().map(|v| v.abs()).collect();
         let grid: Vec<f32> = test_values(n * 81, 3).iter().map(|v| v.abs()).collect();
-        let state = test_values(n * STATE_LEN, 4);
+        let sl = config.state_len();
+        let state = test_values(n * sl, 4);
         let obs = Observations { n, belief: &belief, grid: &grid, state: &state };
         let (mut ws, mut all) = (FeatureWorkspace::default(), Vec::new());
         nets.encode(&nets.params.values, &obs, &mut ws, &mut all);
@@ -229,11 +230,16 @@ mod tests {
                 n: 1,
                 belief: &belief[k * 484..(k + 1) * 484],
                 grid: &grid[k * 81..(k + 1) * 81],
-                state: &state[k * 4..(k + 1) * 4],
+                state: &state[k * sl..(k + 1) * sl],
             };
             let mut single = Vec::new();
             nets.encode(&nets.params.values, &one, &mut FeatureWorkspace::default(), &mut single);
             assert_eq!(single, all[k * f..(k + 1) * f], "sample {k}");
+            assert_eq!(
+                single[f - sl..],
+                state[k * sl..(k + 1) * sl],
+                "the state and depth close the features"
+            );
         }
         assert!(all.iter().any(|&v| v != 0.0), "features must not all be zero");
     }

@@ -288,7 +288,7 @@ fn concat(features: &[f32], actions: &[f32], f: usize, out: &mut Vec<f32>) {
 mod tests {
     use super::*;
     use crate::nn::gradcheck::{assert_close, numerical_grad, test_values};
-    use crate::nn::sac::config::{STATE_LEN, SacNetConfig};
+    use crate::nn::sac::config::SacNetConfig;
 
     fn tiny() -> SacNetConfig {
         SacNetConfig {
@@ -298,6 +298,7 @@ mod tests {
             belief_cells: 5,
             belief_channels: 4,
             grid_cells: 5,
+            depth_columns: 2,
         }
     }
 
@@ -321,7 +322,7 @@ mod tests {
                 n,
                 belief: [image(b, 1), image(b, 2)],
                 grid: [image(g, 3), image(g, 4)],
-                state: [test_values(n * STATE_LEN, 5), test_values(n * STATE_LEN, 6)],
+                state: [test_values(n * config.state_len(), 5), test_values(n * config.state_len(), 6)],
                 actions: test_values(n * ACTION_LEN, 7),
                 rewards: test_values(n, 8),
                 dones: (0..n).map(|k| (k % 3 == 0) as u8 as f32).collect(),
