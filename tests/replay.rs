@@ -265,6 +265,9 @@ fn replay_pfnet_tracks_a_recorded_log_through_the_same_systems() {
     // 0.3 m off per axis, and a filter that ignored its scans would drift with the odometry.
     assert!(mean < 0.45, "PF-net tracking: mean error over the last half {mean} m; errors {errors:?}");
 
+    let cached = [&base[..], &["--localizer", "pfnet", "--features", "cached"]].concat();
+    run(parse(&cached)).expect("localize --localizer pfnet --features cached runs");
+
     let missing = dir.path().join("nowhere.safetensors");
     let flag = format!("pfnet:{}", missing.display());
     let err =

@@ -10,7 +10,7 @@
 //! from another map, or a lost filter, is warned about).
 
 use crate::cli::count;
-use crate::particles::{InitParams, KldParams, PfNetLikelihoodParams, ResampleParams, Task};
+use crate::particles::{InitParams, KldParams, MapFeatures, PfNetLikelihoodParams, ResampleParams, Task};
 use crate::replay::bag::{BagLog, BagTopics, read_bag};
 use crate::replay::{
     EstimateLine, FIT_TOLERANCE_M, InitialGuess, Localizer, LocalizerParams, LogLine, MIN_FIT, ReplayModel,
@@ -58,6 +58,10 @@ pub struct LocalizeArgs {
     /// relative to the working directory).
     #[arg(long, alias = "model", value_parser = parse_localizer, default_value = "likelihood_field")]
     pub localizer: LocalizerChoice,
+    /// PF-net's map features: exact (crop + map encoder per particle, the paper) or cached (crops
+    /// of feature banks encoded once per map; faster, slightly less accurate).
+    #[arg(long, value_enum, default_value = "exact")]
+    pub features: MapFeatures,
     /// Seed of the filter's random streams; the same seed gives the same estimates.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -269,6 +273,7 @@ pub fn localizer_params(args: &LocalizeArgs) -> anyhow::Result<LocalizerParams> 
         model: args.localizer.model,
         pfnet: PfNetLikelihoodParams {
             checkpoint: Some(args.localizer.checkpoint.clone().unwrap_or_else(|| SHIPPED_PFNET.into())),
+            features: args.features,
             ..defaults.pfnet
         },
         resample: ResampleParams {

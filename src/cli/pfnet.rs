@@ -6,7 +6,7 @@ use crate::nn::adam::{Adam, AdamConfig};
 use crate::nn::pfnet::{
     FeatureBank, FeatureCacheSpec, GradBuffers, PfNet, PfNetConfig, PoseLoss, StepBatch, Workspaces, verify,
 };
-use crate::particles::map_view;
+use crate::particles::{MapFeatures, map_view};
 use crate::world::map::NetworkMap;
 use crate::world::map::procedural::{ApartmentParams, generate_apartment};
 use anyhow::Context;
@@ -49,8 +49,8 @@ pub struct BenchArgs {
     pub reps: usize,
     /// Map features per particle: `exact` (crop + map encoder, the paper) or `cached` (crop of the
     /// map's feature banks, built once on a procedural apartment before timing).
-    #[arg(long, value_enum, default_value_t = FeaturePath::Exact)]
-    pub features: FeaturePath,
+    #[arg(long, value_enum, default_value_t = MapFeatures::Exact)]
+    pub features: MapFeatures,
     /// Time a training step (forward, backward, Adam) instead of a filter step.
     #[arg(long)]
     pub train: bool,
@@ -60,12 +60,6 @@ pub struct BenchArgs {
     /// Filter steps per training sequence.
     #[arg(long, default_value_t = 25)]
     pub steps: usize,
-}
-
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FeaturePath {
-    Exact,
-    Cached,
 }
 
 pub fn run(cmd: PfNetCommand) -> anyhow::Result<()> {
@@ -138,14 +132,14 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         let obs = uniform(model.obs_len());
         match args.features {
             // Local maps as network input, like the Keras peer's benchmark.
-            FeaturePath::Exact => {
+            MapFeatures::Exact => {
                 let maps = uniform(k * model.local_map_len());
                 time(args.reps, || {
                     model.encode_observations_par(&obs, &mut obs_features, &pool);
                     model.log_likelihoods_exact(&obs_features, &owner, &maps, &mut loglik, &pool);
                 })
             }
-            FeaturePath::Cached => {
+            MapFeatures::Cached => {
                 let apartment = generate_apartment(0, &ApartmentParams::default());
                 let map = NetworkMap::from_fine(&apartment, 0.1);
                 let bank = FeatureBank::build(&model, &map_view(&map), &FeatureCacheSpec::default());

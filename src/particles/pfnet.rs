@@ -18,9 +18,11 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::{Arc, Mutex, OnceLock};
 
-/// How a particle's map features are computed.
-#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+/// How a particle's map features are computed. Spelled `exact` and `cached` in RON and on the
+/// command line.
+#[derive(Serialize, Deserialize, clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
+#[value(rename_all = "snake_case")]
 pub enum MapFeatures {
     /// Crop the particle's local map, then run the map encoder on it (the paper).
     #[default]
