@@ -130,6 +130,16 @@ fn eval_swaps_replace_a_step_in_every_schedule() {
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     let localizers: Vec<_> = rows.iter().map(|r| r["localizer"].as_str().unwrap()).collect();
     assert_eq!(localizers, ["mcl_beam", "mcl_beam"], "both schedules run the swapped-in beam model");
+    // Common random numbers: both policies' episodes start alike, so each pairs with the other.
+    let paired = std::fs::read_to_string(out.join("paired.md")).unwrap();
+    assert!(paired.contains("### mcl_beam · tracking · seen"), "{paired}");
+    for (policy, other) in [("random", "turn"), ("turn", "random")] {
+        let row = paired
+            .lines()
+            .find(|l| l.starts_with(&format!("| {policy} |")))
+            .unwrap_or_else(|| panic!("{paired}"));
+        assert!(row.contains(&format!("| {other} | 2 |")), "both episodes paired: {row}");
+    }
 }
 
 #[test]

@@ -7,6 +7,7 @@ mod config;
 mod episodes;
 mod figure;
 mod font;
+mod paired;
 mod table;
 
 pub use cell::{CellOutcome, CellSpec, ResultRow, cell_steps, cells, labels, run_cell, schedule_labels};
@@ -14,4 +15,5 @@ pub use config::{EvalConfig, LoadedEval, MapGroup};
 pub use episodes::EpisodeRow;
 pub use figure::{FigureError, encode_png, episode_figure, figure_file_name, figure_title};
 pub use font::register_sans_serif;
+pub use paired::{PairedRow, paired_markdown, paired_rows};
 pub use table::{csv, markdown, write_results};

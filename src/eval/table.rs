@@ -1,21 +1,23 @@
 //! Writes evaluation results: results.json (rows), results.csv, results.md laid out like the
-//! paper's tables (rows = policies, column groups = tasks, one column per split), and
-//! episodes.csv (every episode behind every row).
+//! paper's tables (rows = policies, column groups = tasks, one column per split), episodes.csv
+//! (every episode behind every row) and paired.md (each policy against its cell's best other).
 
 use crate::eval::cell::ResultRow;
 use crate::eval::episodes::EpisodeRow;
+use crate::eval::paired::{paired_markdown, paired_rows};
 use crate::world::map::write_atomically;
 use anyhow::Context;
 use serde::Serialize;
 use std::path::Path;
 
-/// Writes the four result files atomically into `out`.
+/// Writes the five result files atomically into `out`.
 pub fn write_results(out: &Path, rows: &[ResultRow], episodes: &[EpisodeRow]) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     write_atomically(&out.join("results.json"), serde_json::to_string_pretty(rows)?.as_bytes())?;
     write_atomically(&out.join("results.csv"), &csv(rows)?)?;
     write_atomically(&out.join("results.md"), markdown(rows).as_bytes())?;
     write_atomically(&out.join("episodes.csv"), &csv(episodes)?)?;
+    write_atomically(&out.join("paired.md"), paired_markdown(&paired_rows(episodes)).as_bytes())?;
     Ok(())
 }
 
