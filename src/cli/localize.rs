@@ -105,6 +105,7 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
     let mut filter = Localizer::new(map, params, guess, args.seed)
         .with_context(|| format!("starting the filter on map {} and {input}", args.map.display()))?;
     println!("{}", start_line(&filter, guess));
+    println!("each scan runs the systems {}", filter.systems().join(" → "));
     if filter.fell_back_to_global() {
         eprintln!(
             "warning: the semi-global box around the initial guess holds no traversable cell; drew globally"

@@ -118,23 +118,7 @@ impl LocalizerParams {
         self.resample.validate()?;
         Ok(())
     }
-}
 
-/// What the filter is told about the start pose.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum InitialGuess {
-    /// A pose the user believes in (like AMCL's initial pose): tracking draws a Gaussian
-    /// (σ = `tracking_sigma_m` / `tracking_sigma_deg`) around it, semi-global draws uniformly over
-    /// traversable cells in the box around it. The pose is used as it is.
-    Pose(Pose2),
-    /// The true start pose of a simulated log: perturbed as the task prescribes (paper §V), then
-    /// drawn around, exactly as `init_particles` does in the simulator.
-    PerturbedTruth(Pose2),
-    /// Nothing known: only task global can start from this.
-    Unknown,
-}
-
-impl LocalizerParams {
     /// The filter as a schedule file would spell it: `log_feed` where the simulator senses, then
     /// the simulator's filter systems with these parameters.
     pub fn schedule(&self) -> String {
@@ -160,12 +144,27 @@ impl LocalizerParams {
     }
 }
 
+/// What the filter is told about the start pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum InitialGuess {
+    /// A pose the user believes in (like AMCL's initial pose): tracking draws a Gaussian
+    /// (σ = `tracking_sigma_m` / `tracking_sigma_deg`) around it, semi-global draws uniformly over
+    /// traversable cells in the box around it. The pose is used as it is.
+    Pose(Pose2),
+    /// The true start pose of a simulated log: perturbed as the task prescribes (paper §V), then
+    /// drawn around, exactly as `init_particles` does in the simulator.
+    PerturbedTruth(Pose2),
+    /// Nothing known: only task global can start from this.
+    Unknown,
+}
+
 /// A particle filter over one map, fed one scan at a time.
 pub struct Localizer {
     app: App,
     robot: Entity,
     map: Entity,
     params: LocalizerParams,
+    systems: Vec<&'static str>,
 }
 
 impl Localizer {
@@ -189,6 +188,7 @@ impl Localizer {
         let pipeline =
             Pipeline::parse(&params.schedule(), Path::new("the localize flags"), &standard_registry())
                 .map_err(|e| ReplayError::Schedule(e.to_string()))?;
+        let systems = pipeline.names();
         let mut app = App::new();
         app.add_plugins(ApfnPlugin { pipeline });
         let world = app.world_mut();
@@ -212,7 +212,7 @@ impl Localizer {
         world.run_system_once(estimate).expect("estimate needs no resource");
         // Particles are validated above and the traversable map is not empty, so the draw succeeded.
         debug_assert!(world.get::<NeedsInit>(robot).is_none(), "the initial set was drawn");
-        Ok(Self { app, robot, map, params })
+        Ok(Self { app, robot, map, params, systems })
     }
 
     /// One filter step: moves every particle by `odom_delta` (the odometry motion since the
@@ -283,6 +283,11 @@ impl Localizer {
         &self.params
     }
 
+    /// The registered systems one update runs, in order.
+    pub fn systems(&self) -> &[&'static str] {
+        &self.systems
+    }
+
     fn robot_part<C: Component>(&self) -> &C {
         self.app.world().get::<C>(self.robot).expect("the robot was spawned with its filter parts")
     }
@@ -306,6 +311,18 @@ mod tests {
 
     fn small_radius() -> LocalizerParams {
         LocalizerParams { robot_radius_m: 0.05, ..Default::default() }
+    }
+
+    #[test]
+    fn localizer_runs_the_simulators_filter_systems_behind_log_feed() {
+        let guess = InitialGuess::Pose(Pose2::new(1.0, 0.7, 0.2));
+        let systems = |model| {
+            let params = LocalizerParams { model, ..small_radius() };
+            Localizer::new(tiny_room(), params, guess, 1).expect("filter").systems().to_vec()
+        };
+        let filter = ["init_particles", "transition", "mcl_likelihood_field", "resample", "estimate"];
+        assert_eq!(systems(ReplayModel::LikelihoodField), [&["log_feed"][..], &filter].concat());
+        assert_eq!(systems(ReplayModel::Beam)[3], "mcl_beam_model");
     }
 
     #[test]
