@@ -1,4 +1,4 @@
-//! Offline replay: localize recorded data without the simulator. `log` reads and writes the JSON
+//! Offline replay: localize recorded data with no simulated robot. `log` reads and writes the JSON
 //! Lines formats (ROS LaserScan fields + odometry pose in, one estimate per line out);
 //! `localizer` runs the simulator's filter systems on them (`Localizer::new`, `update`), fed by
 //! `feed`'s `log_feed` system in place of the simulated sensors;
