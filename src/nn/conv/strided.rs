@@ -105,9 +105,7 @@ impl Plan {
         yt: &mut [f32],
     ) {
         let (total, k, d) = (n * self.pixels(), self.kernel, self.dilation);
-        for o0 in (0..self.c_out).step_by(OB * LANES) {
-            let ob = OB.min((self.c_out - o0) / LANES);
-            let block: [usize; OB] = std::array::from_fn(|b| o0 + b.min(ob - 1) * LANES);
+        for (ob, block) in output_blocks::<OB>(self.c_out) {
             for q0 in (0..total).step_by(PX) {
                 let q: [usize; PX] = std::array::from_fn(|j| (q0 + j).min(total - 1));
                 let origin = q.map(|q| self.origin(q));
@@ -175,9 +173,7 @@ impl Plan {
         dwt: &mut [f32],
     ) {
         let taps = self.taps();
-        for o0 in (0..self.c_out).step_by(OB * LANES) {
-            let ob = OB.min((self.c_out - o0) / LANES);
-            let block: [usize; OB] = std::array::from_fn(|b| o0 + b.min(ob - 1) * LANES);
+        for (ob, block) in output_blocks::<OB>(self.c_out) {
             for t0 in (0..taps).step_by(TB) {
                 let tap: [usize; TB] = std::array::from_fn(|t| (t0 + t).min(taps - 1));
                 let off = tap.map(|t| self.tap_offset(t));
@@ -409,6 +405,15 @@ impl Conv2d {
 }
 
 /// Consecutive buffers of the given lengths from `scratch` (grown as needed, stale contents kept).
+/// Output channels in register tiles of up to `OB` × 16 lanes: each tile's live vector count and
+/// the first channel of every vector (a short last tile repeats its last vector, never stored).
+fn output_blocks<const OB: usize>(c_out: usize) -> impl Iterator<Item = (usize, [usize; OB])> {
+    (0..c_out).step_by(OB * LANES).map(move |o0| {
+        let ob = OB.min((c_out - o0) / LANES);
+        (ob, std::array::from_fn(|b| o0 + b.min(ob - 1) * LANES))
+    })
+}
+
 fn carve<const N: usize>(scratch: &mut Vec<f32>, lens: [usize; N]) -> [&mut [f32]; N] {
     let need = lens.iter().sum();
     if scratch.len() < need {
