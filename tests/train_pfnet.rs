@@ -18,6 +18,8 @@ fn tiny() -> TrainPfNetConfig {
         train_steps: 4,
         eval_every: 2,
         seed: 5,
+        // A decaying rate, so resuming must also pick the schedule up where it stopped.
+        final_learning_rate: Some(1e-4),
         ..TrainPfNetConfig::default()
     }
 }
@@ -33,6 +35,22 @@ fn train_pfnet_data_are_deterministic_and_shaped() {
         assert_eq!(e.poses.len(), 4, "every episode has `steps` steps");
         assert_eq!(e.grids.len(), 4 * 56 * 56, "one 56 × 56 grid per step");
     }
+}
+
+#[test]
+fn train_pfnet_learning_rate_follows_a_half_cosine() {
+    let config = TrainPfNetConfig { train_steps: 100, ..tiny() };
+    let (start, end) = (config.adam.learning_rate, 1e-4);
+    assert_eq!(config.learning_rate_at(0), start);
+    assert!((config.learning_rate_at(50) - (start + end) / 2.0).abs() < 1e-7, "halfway is the midpoint");
+    assert!((config.learning_rate_at(100) - end).abs() < 1e-9);
+    let rates: Vec<f32> = (0..=100).map(|s| config.learning_rate_at(s)).collect();
+    assert!(rates.windows(2).all(|w| w[1] <= w[0]), "the rate never rises");
+    let constant = TrainPfNetConfig { final_learning_rate: None, ..config.clone() };
+    assert!((0..=100).all(|s| constant.learning_rate_at(s) == start));
+    let rising = TrainPfNetConfig { final_learning_rate: Some(1.0), ..config };
+    let err = rising.check().unwrap_err();
+    assert!(err.contains("final_learning_rate"), "{err}");
 }
 
 #[test]

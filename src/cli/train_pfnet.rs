@@ -39,7 +39,7 @@ pub struct LogRow {
     /// Mean training loss over the steps since the previous row.
     pub train_loss: f64,
     pub val_loss: f64,
-    /// Wall-clock seconds of this process when the row was written.
+    /// Wall-clock seconds of the run (all its processes) when the row was written.
     pub wall_s: f64,
 }
 
@@ -69,6 +69,8 @@ pub fn run(args: TrainPfNetArgs) -> anyhow::Result<()> {
     };
     let mut rows: Vec<LogRow> = if args.resume { read_log(&log_path)? } else { vec![] };
     rows.retain(|r| r.step <= state.step);
+    // A resumed run's clock continues from its last row, so `wall_s` is the run's whole cost.
+    let wall_before = rows.last().map_or(0.0, |r| r.wall_s);
 
     let started = Instant::now();
     let sim_bar = ProgressBar::new_spinner();
@@ -106,7 +108,7 @@ pub fn run(args: TrainPfNetArgs) -> anyhow::Result<()> {
                 step: state.step,
                 train_loss,
                 val_loss,
-                wall_s: started.elapsed().as_secs_f64(),
+                wall_s: wall_before + started.elapsed().as_secs_f64(),
             });
             since_log = (0.0, 0);
             if val_loss < state.best_val_loss {

@@ -54,6 +54,9 @@ pub struct TrainPfNetConfig {
     pub heading_weight: f32,
     /// Adam (the paper's table: 2.5e-3; the authors' code: 5e-5 constant).
     pub adam: AdamConfig,
+    /// When set, the learning rate falls from `adam.learning_rate` to this one along a half
+    /// cosine over `train_steps` (constant when absent, as in the authors' code).
+    pub final_learning_rate: Option<f32>,
     /// Gradient steps in all, and how often to validate, log and checkpoint.
     pub train_steps: u64,
     pub eval_every: u64,
@@ -82,6 +85,7 @@ impl Default for TrainPfNetConfig {
             init_std_deg: 30.0,
             heading_weight: 0.36,
             adam: AdamConfig { learning_rate: 1e-3, ..AdamConfig::default() },
+            final_learning_rate: None,
             train_steps: 10_000,
             eval_every: 250,
             seed: 0,
@@ -116,9 +120,26 @@ impl TrainPfNetConfig {
         if !(self.adam.learning_rate > 0.0 && self.adam.learning_rate.is_finite()) {
             return Err("adam.learning_rate: expected a positive number".into());
         }
+        if let Some(rate) = self.final_learning_rate
+            && !(rate >= 0.0 && rate <= self.adam.learning_rate)
+        {
+            return Err(format!(
+                "final_learning_rate: expected 0 to adam.learning_rate ({}), found {rate}",
+                self.adam.learning_rate
+            ));
+        }
         PfNetConfig::named(&self.network)
             .map(|_| ())
             .ok_or_else(|| format!("network: expected `paper` or `compact`, found `{}`", self.network))
+    }
+
+    /// The learning rate of gradient step `step` (0-based).
+    pub fn learning_rate_at(&self, step: u64) -> f32 {
+        let start = self.adam.learning_rate;
+        let Some(end) = self.final_learning_rate else { return start };
+        let progress = step as f64 / self.train_steps as f64;
+        let cosine = 0.5 * (1.0 + (std::f64::consts::PI * progress.min(1.0)).cos());
+        (f64::from(end) + f64::from(start - end) * cosine) as f32
     }
 
     fn loss(&self) -> PoseLoss {
@@ -332,6 +353,7 @@ impl TrainState {
     ) -> f64 {
         let episodes = batch_episodes(config, data.episodes.len(), self.step);
         buffers.fill(config, &self.model, data, &episodes, &mut stream(&[config.seed, 0xBA7C, self.step]));
+        self.adam.config.learning_rate = config.learning_rate_at(self.step);
         let loss = self.model.train_step(&buffers.batch(config), &config.loss(), &mut self.adam, grads, pool);
         self.step += 1;
         loss
