@@ -20,12 +20,33 @@ pub struct PfNet {
     joint: Joint,
 }
 
-/// Buffers for one thread's share of the work; reused across calls (they only grow).
+/// What one filter step's forward pass leaves for its backward.
 #[derive(Clone, Debug, Default)]
-pub struct Workspace {
+pub struct StepActivations {
     pub map: MapActivations,
     pub obs: ObsActivations,
     pub joint: JointActivations,
+}
+
+impl StepActivations {
+    /// Swaps these activations with `kept` but keeps this side's scratch buffers (im2col,
+    /// gradients: most of a step's memory), so a sequence's kept steps hold only what their
+    /// backward reads.
+    pub(super) fn swap_keeping_scratch(&mut self, kept: &mut Self) {
+        std::mem::swap(self, kept);
+        self.map.trade_scratch(&mut kept.map);
+        self.obs.trade_scratch(&mut kept.obs);
+        self.joint.trade_scratch(&mut kept.joint);
+    }
+}
+
+/// Buffers for one thread's share of the work; reused across calls (they only grow).
+#[derive(Clone, Debug, Default)]
+pub struct Workspace {
+    pub acts: StepActivations,
+    /// Every step's activations of the training sequence in flight, kept for its backward pass
+    /// (see `train_step.rs`).
+    pub(super) kept: Vec<StepActivations>,
     /// A parallel task's map features before the joint stage (see `batch.rs`).
     pub chunk_map_features: Vec<f32>,
     grad_map_features: Vec<f32>,
@@ -87,14 +108,14 @@ impl PfNet {
 
     /// obs [n][obs_len] → features [n][obs_feature_len].
     pub fn encode_observations(&self, obs: &[f32], n: usize, features: &mut [f32], ws: &mut Workspace) {
-        self.obs.forward(&self.params, obs, n, &mut ws.obs);
-        features.copy_from_slice(&ws.obs.features[..n * self.obs_feature_len()]);
+        self.obs.forward(&self.params, obs, n, &mut ws.acts.obs);
+        features.copy_from_slice(&ws.acts.obs.features[..n * self.obs_feature_len()]);
     }
 
     /// local maps [n][local_map_len] → features [n][map_feature_len].
     pub fn encode_local_maps(&self, maps: &[f32], n: usize, features: &mut [f32], ws: &mut Workspace) {
-        self.map.forward(&self.params, maps, n, &mut ws.map);
-        features.copy_from_slice(&ws.map.features[..n * self.map_feature_len()]);
+        self.map.forward(&self.params, maps, n, &mut ws.acts.map);
+        features.copy_from_slice(&ws.acts.map.features[..n * self.map_feature_len()]);
     }
 
     /// The joint stage for `owner.len()` particles: map features [n][map_feature_len], and
@@ -108,25 +129,54 @@ impl PfNet {
         ws: &mut Workspace,
     ) {
         let n = owner.len();
-        self.fill_joint_input(map_features, obs_features, n, |i| owner[i] as usize, &mut ws.joint);
-        self.joint.forward(&self.params, n, &mut ws.joint);
-        loglik.copy_from_slice(&ws.joint.loglik[..n]);
+        self.fill_joint_input(map_features, obs_features, n, |i| owner[i] as usize, &mut ws.acts.joint);
+        self.joint.forward(&self.params, n, &mut ws.acts.joint);
+        loglik.copy_from_slice(&ws.acts.joint.loglik[..n]);
     }
 
-    /// One filter step's log-likelihoods for `k` particles sharing one observation (no gradient).
-    pub fn step_log_likelihoods(&self, obs: &[f32], maps: &[f32], k: usize, ws: &mut Workspace) -> Vec<f32> {
-        let p = &self.params;
-        self.obs.forward(p, obs, 1, &mut ws.obs);
-        self.map.forward(p, maps, k, &mut ws.map);
-        self.fill_joint_input(&ws.map.features, &ws.obs.features, k, |_| 0, &mut ws.joint);
-        self.joint.forward(p, k, &mut ws.joint);
-        ws.joint.loglik[..k].to_vec()
+    /// One filter step's log-likelihoods for `k` particles sharing one observation, leaving the
+    /// activations in `ws.acts` for `step_backward`.
+    pub fn step_forward<'w>(&self, obs: &[f32], maps: &[f32], k: usize, ws: &'w mut Workspace) -> &'w [f32] {
+        let (p, acts) = (&self.params, &mut ws.acts);
+        self.obs.forward(p, obs, 1, &mut acts.obs);
+        self.map.forward(p, maps, k, &mut acts.map);
+        self.fill_joint_input(&acts.map.features, &acts.obs.features, k, |_| 0, &mut acts.joint);
+        self.joint.forward(p, k, &mut acts.joint);
+        &acts.joint.loglik[..k]
     }
 
-    /// One filter step's share of a training batch: the observation, its `k` particles' local
-    /// maps, forward to the log-likelihoods, `loss` turns them into (loss, d loss / d loglik),
-    /// then backward, accumulating every weight gradient into `grads` (laid out like `params`).
-    /// Returns the loss.
+    /// The backward pass of the `step_forward` whose activations are in `ws.acts`: from
+    /// d loss / d loglik of its `k` particles, accumulates every weight gradient into `grads`
+    /// (laid out like `params`).
+    pub fn step_backward(
+        &self,
+        obs: &[f32],
+        maps: &[f32],
+        k: usize,
+        dloglik: &[f32],
+        grads: &mut [f32],
+        ws: &mut Workspace,
+    ) {
+        let (p, acts) = (&self.params, &mut ws.acts);
+        self.joint.backward(p, k, &mut acts.joint, dloglik, grads);
+        let (per_particle, map_len) = (self.joint.input_len(), self.map_feature_len());
+        let (dmap, dobs) = (&mut ws.grad_map_features, &mut ws.grad_obs_features);
+        dmap.resize(k * map_len, 0.0);
+        dobs.clear();
+        dobs.resize(self.obs_feature_len(), 0.0);
+        for (i, dinput) in acts.joint.dinput.chunks_exact(per_particle).take(k).enumerate() {
+            dmap[i * map_len..(i + 1) * map_len].copy_from_slice(&dinput[..map_len]);
+            // Every particle saw the same observation features: their gradients add up.
+            for (d, g) in dobs.iter_mut().zip(&dinput[map_len..]) {
+                *d += g;
+            }
+        }
+        self.map.backward(p, maps, k, &mut acts.map, dmap, grads);
+        self.obs.backward(p, obs, 1, &mut acts.obs, dobs, grads);
+    }
+
+    /// One filter step on its own: forward, `loss` turns the log-likelihoods into (loss,
+    /// d loss / d loglik), backward into `grads`. Returns the loss.
     pub fn step_gradient(
         &self,
         obs: &[f32],
@@ -136,28 +186,8 @@ impl PfNet {
         grads: &mut [f32],
         ws: &mut Workspace,
     ) -> f64 {
-        let p = &self.params;
-        self.obs.forward(p, obs, 1, &mut ws.obs);
-        self.map.forward(p, maps, k, &mut ws.map);
-        self.fill_joint_input(&ws.map.features, &ws.obs.features, k, |_| 0, &mut ws.joint);
-        self.joint.forward(p, k, &mut ws.joint);
-        let (value, dloglik) = loss(&ws.joint.loglik[..k]);
-
-        self.joint.backward(p, k, &mut ws.joint, &dloglik, grads);
-        let (per_particle, map_len) = (self.joint.input_len(), self.map_feature_len());
-        let (dmap, dobs) = (&mut ws.grad_map_features, &mut ws.grad_obs_features);
-        dmap.resize(k * map_len, 0.0);
-        dobs.clear();
-        dobs.resize(self.obs_feature_len(), 0.0);
-        for (i, dinput) in ws.joint.dinput.chunks_exact(per_particle).take(k).enumerate() {
-            dmap[i * map_len..(i + 1) * map_len].copy_from_slice(&dinput[..map_len]);
-            // Every particle saw the same observation features: their gradients add up.
-            for (d, g) in dobs.iter_mut().zip(&dinput[map_len..]) {
-                *d += g;
-            }
-        }
-        self.map.backward(p, maps, k, &mut ws.map, &ws.grad_map_features, grads);
-        self.obs.backward(p, obs, 1, &mut ws.obs, &ws.grad_obs_features, grads);
+        let (value, dloglik) = loss(self.step_forward(obs, maps, k, ws));
+        self.step_backward(obs, maps, k, &dloglik, grads, ws);
         value
     }
 

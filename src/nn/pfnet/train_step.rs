@@ -78,7 +78,7 @@ impl PfNet {
         let sequences = batch.steps().div_ceil(batch.sequence.max(1));
         let losses: Vec<f64> = (0..sequences)
             .into_par_iter()
-            .map(|sequence| pool.with(|ws| self.sequence_forward(batch, sequence, loss, ws).0))
+            .map(|sequence| pool.with(|ws| self.sequence_forward(batch, sequence, loss, false, ws).0))
             .collect();
         losses.iter().sum()
     }
@@ -86,19 +86,29 @@ impl PfNet {
     /// One sequence forward: every step's log-likelihoods accumulate into log-weights, every
     /// step's weighted mean is scored. Returns the loss and d loss / d loglik per step (a step's
     /// log-likelihoods count in every later step's weights: the sum of later d loss / d log_w).
+    /// With `keep`, step i's activations stay in `ws.kept[i]` for the backward pass.
     fn sequence_forward(
         &self,
         batch: &StepBatch,
         sequence: usize,
         loss: &PoseLoss,
+        keep: bool,
         ws: &mut Workspace,
     ) -> (f64, Vec<Vec<f32>>) {
         let k = batch.k;
         let mut log_w = vec![0.0f32; k];
         let (mut value, mut dloglik) = (0.0, Vec::with_capacity(batch.sequence));
-        for s in self.sequence_steps(batch, sequence) {
-            let loglik = self.step_log_likelihoods(self.step_obs(batch, s), self.step_maps(batch, s), k, ws);
-            log_w.iter_mut().zip(&loglik).for_each(|(w, l)| *w += l);
+        for (i, s) in self.sequence_steps(batch, sequence).enumerate() {
+            let loglik = self.step_forward(self.step_obs(batch, s), self.step_maps(batch, s), k, ws);
+            log_w.iter_mut().zip(loglik).for_each(|(w, l)| *w += l);
+            if keep {
+                if ws.kept.len() <= i {
+                    ws.kept.push(Default::default());
+                }
+                // A swap, not a copy: the step's buffers move out and last sequence's come back
+                // to be overwritten, so a warm workspace allocates nothing.
+                ws.acts.swap_keeping_scratch(&mut ws.kept[i]);
+            }
             let (l, d) = loss.evaluate(&log_w, &batch.states[s * k..(s + 1) * k], batch.targets[s]);
             value += l;
             dloglik.push(d);
@@ -110,8 +120,9 @@ impl PfNet {
         (value, dloglik)
     }
 
-    /// One sequence's loss and gradient: the forward pass above, then per step forward again and
-    /// backward (recomputing costs a third more arithmetic and keeps memory to one step).
+    /// One sequence's loss and gradient: the forward pass above keeping every step's
+    /// activations (T steps of one sequence per thread; the README's speed table has the peak
+    /// memory this costs), then each step's backward from them instead of a second forward.
     fn sequence_gradient(
         &self,
         batch: &StepBatch,
@@ -121,10 +132,10 @@ impl PfNet {
         pool: &Workspaces,
     ) -> f64 {
         pool.with(|ws| {
-            let (value, dloglik) = self.sequence_forward(batch, sequence, loss, ws);
-            for (s, d) in self.sequence_steps(batch, sequence).zip(dloglik) {
-                let (obs, maps) = (self.step_obs(batch, s), self.step_maps(batch, s));
-                self.step_gradient(obs, maps, batch.k, |_| (0.0, d), grads, ws);
+            let (value, dloglik) = self.sequence_forward(batch, sequence, loss, true, ws);
+            for ((i, s), d) in self.sequence_steps(batch, sequence).enumerate().zip(dloglik) {
+                ws.acts.swap_keeping_scratch(&mut ws.kept[i]);
+                self.step_backward(self.step_obs(batch, s), self.step_maps(batch, s), batch.k, &d, grads, ws);
             }
             value
         })
@@ -192,6 +203,31 @@ mod tests {
         }
         let last = model.batch_gradient(&batch, &loss, &mut grads, &pool);
         assert!(last < first, "six Adam steps on one batch must lower its loss: {first} → {last}");
+    }
+
+    #[test]
+    fn kept_activations_of_an_earlier_batch_do_not_leak_into_the_next() {
+        // A warm workspace holds the last batch's activations (and a longer sequence's); the
+        // gradient must be the one a fresh workspace computes, bit for bit.
+        let model = PfNet::new(PfNetConfig::compact(), 3).unwrap();
+        let (obs, maps, states, targets) = batch_data(&model);
+        let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / 6.0 };
+        let batch = |sequence| StepBatch {
+            obs: &obs,
+            maps: &maps,
+            states: &states,
+            targets: &targets,
+            k: 4,
+            sequence,
+        };
+        let gradient = |pool: &Workspaces| {
+            let mut grads = GradBuffers::default();
+            model.batch_gradient(&batch(2), &loss, &mut grads, pool);
+            grads.total
+        };
+        let warm = Workspaces::for_current_pool();
+        model.batch_gradient(&batch(6), &loss, &mut GradBuffers::default(), &warm);
+        assert_eq!(gradient(&warm), gradient(&Workspaces::for_current_pool()));
     }
 
     #[test]
