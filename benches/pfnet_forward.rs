@@ -6,8 +6,8 @@
 
 use apfn::nn::adam::{Adam, AdamConfig};
 use apfn::nn::pfnet::{
-    FeatureBank, FeatureCacheSpec, GradBuffers, LocalMapSpec, PfNet, PfNetConfig, PoseLoss, StepBatch,
-    Workspaces, crop_local_maps,
+    FeatureBank, FeatureCacheSpec, GradBuffers, LocalMapSpec, MapInput, PfNet, PfNetConfig, PoseLoss,
+    StepBatch, Workspaces, crop_local_maps,
 };
 use apfn::particles::map_view;
 use apfn::world::map::NetworkMap;
@@ -70,8 +70,15 @@ fn training_step(c: &mut Criterion) {
         let poses = uniform((n * k + n) * 3);
         let states: Vec<[f32; 3]> = poses[..n * k * 3].chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
         let targets: Vec<[f32; 3]> = poses[n * k * 3..].chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
-        let data =
-            StepBatch { obs: &obs, maps: &maps, states: &states, targets: &targets, k, sequence: steps };
+        let data = StepBatch {
+            obs: &obs,
+            maps: &maps,
+            states: &states,
+            targets: &targets,
+            k,
+            sequence: steps,
+            input: MapInput::LocalMaps,
+        };
         let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / n as f32 };
         let mut adam = Adam::new(AdamConfig::default(), model.params.len());
         let (mut grads, pool) = (GradBuffers::default(), Workspaces::for_current_pool());

@@ -3,8 +3,9 @@
 //! never interrupted, and training lowers the validation loss of a fixed batch.
 
 use apfn::nn::checkpoint::Checkpoint;
-use apfn::nn::pfnet::{GradBuffers, Workspaces};
-use apfn::train::pfnet::{BatchBuffers, TrainPfNetConfig, TrainState, simulate_data};
+use apfn::nn::pfnet::{FeatureCacheSpec, GradBuffers, PfNet, PfNetConfig, Workspaces};
+use apfn::particles::MapFeatures;
+use apfn::train::pfnet::{BatchBuffers, TrainPfNetConfig, TrainState, feature_banks, simulate_data};
 
 fn tiny() -> TrainPfNetConfig {
     TrainPfNetConfig {
@@ -62,7 +63,7 @@ fn train_pfnet_resume_writes_the_same_checkpoint_bytes() {
     let run = |state: &mut TrainState, until: u64| {
         let (mut buffers, mut grads) = (BatchBuffers::default(), GradBuffers::default());
         while state.step < until {
-            state.train_step(&config, &train, &mut buffers, &mut grads, &pool);
+            state.train_step(&config, (&train, &[]), &mut buffers, &mut grads, &pool);
         }
     };
 
@@ -98,6 +99,42 @@ fn train_pfnet_resume_writes_the_same_checkpoint_bytes() {
 }
 
 #[test]
+fn train_pfnet_through_cached_features_keeps_the_map_encoder_frozen() {
+    let dir = tempfile::tempdir().unwrap();
+    let init = PfNet::new(PfNetConfig::compact(), 9).unwrap();
+    let init_path = dir.path().join("init.safetensors");
+    init.save(&init_path).unwrap();
+    let config = TrainPfNetConfig {
+        features: MapFeatures::Cached,
+        init: Some(init_path.display().to_string()),
+        cache: FeatureCacheSpec { orientations: 8, ..Default::default() },
+        ..tiny()
+    };
+    let without_init = TrainPfNetConfig { init: None, ..config.clone() };
+    assert!(
+        without_init.check().unwrap_err().starts_with("init:"),
+        "cached features need the encoder's checkpoint"
+    );
+
+    let [train, _] = simulate_data(&config, |_, _| {}).unwrap();
+    let mut state = TrainState::new(&config).unwrap();
+    assert_eq!(state.model.params.values, init.params.values, "training starts from `init`");
+    let banks = feature_banks(&config, &state.model, &train, |_| {});
+    assert_eq!(banks.len(), train.maps.len(), "one bank per training map");
+    let pool = Workspaces::for_current_pool();
+    let (mut buffers, mut grads) = (BatchBuffers::default(), GradBuffers::default());
+    for _ in 0..3 {
+        let loss = state.train_step(&config, (&train, &banks), &mut buffers, &mut grads, &pool);
+        assert!(loss.is_finite());
+    }
+    for (id, spec) in init.params.specs() {
+        let (before, after) = (init.params.get(id), state.model.params.get(id));
+        let map_encoder = spec.name.starts_with("m_") || spec.name.starts_with("m2_");
+        assert_eq!(before == after, map_encoder, "{}: only the map encoder stays as it was", spec.name);
+    }
+}
+
+#[test]
 fn collect_is_deterministic_resumable_and_loads_back() {
     use apfn::train::collect::{CollectConfig, Manifest, collect, load_collection};
     let config = CollectConfig {
@@ -130,4 +167,21 @@ fn collect_is_deterministic_resumable_and_loads_back() {
     assert_eq!(set.episodes.len(), 6, "two shards of three episodes");
     assert_eq!(set.maps.len(), 2);
     assert!(set.episodes.iter().all(|e| e.poses.len() == 4 && e.grids.len() == 4 * 56 * 56));
+}
+
+#[test]
+fn every_shipped_train_pfnet_config_loads_and_checks() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).expect("scenes/ exists") {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        if name.starts_with("train_pfnet") && name.ends_with(".ron") {
+            let config: TrainPfNetConfig =
+                apfn::compose::read_ron(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+            config.check().unwrap_or_else(|e| panic!("{name}: {e}"));
+            checked += 1;
+        }
+    }
+    assert!(checked >= 2, "scenes/ holds the pretraining and the cached fine-tuning configs");
 }

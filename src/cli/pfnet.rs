@@ -4,7 +4,8 @@
 use crate::cli::set_threads;
 use crate::nn::adam::{Adam, AdamConfig};
 use crate::nn::pfnet::{
-    FeatureBank, FeatureCacheSpec, GradBuffers, PfNet, PfNetConfig, PoseLoss, StepBatch, Workspaces, verify,
+    FeatureBank, FeatureCacheSpec, GradBuffers, MapInput, PfNet, PfNetConfig, PoseLoss, StepBatch,
+    Workspaces, verify,
 };
 use crate::particles::{MapFeatures, map_view};
 use crate::world::map::NetworkMap;
@@ -117,8 +118,15 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         let poses = uniform(steps * (k + 1) * 3);
         let states: Vec<[f32; 3]> = poses[..steps * k * 3].chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
         let targets: Vec<[f32; 3]> = poses[steps * k * 3..].chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
-        let batch =
-            StepBatch { obs: &obs, maps: &maps, states: &states, targets: &targets, k, sequence: args.steps };
+        let batch = StepBatch {
+            obs: &obs,
+            maps: &maps,
+            states: &states,
+            targets: &targets,
+            k,
+            sequence: args.steps,
+            input: MapInput::LocalMaps,
+        };
         let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / steps as f32 };
         let mut adam = Adam::new(AdamConfig::default(), model.params.len());
         let mut grads = GradBuffers::default();

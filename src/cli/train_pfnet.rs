@@ -5,10 +5,13 @@
 use crate::cli::set_threads;
 use crate::compose::read_ron;
 use crate::nn::checkpoint::Checkpoint;
-use crate::nn::pfnet::{GradBuffers, Workspaces};
+use crate::nn::pfnet::{FeatureBank, GradBuffers, Workspaces};
+use crate::particles::MapFeatures;
 use crate::train::curves::loss_curves_png;
 use crate::train::log::{read_log, write_log};
-use crate::train::pfnet::{BatchBuffers, TrainPfNetConfig, TrainState, simulate_data, validation_loss};
+use crate::train::pfnet::{
+    BatchBuffers, TrainPfNetConfig, TrainState, feature_banks, simulate_data, validation_loss,
+};
 use crate::world::map::write_atomically;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -87,6 +90,24 @@ pub fn run(args: TrainPfNetArgs) -> anyhow::Result<()> {
         started.elapsed().as_secs_f64()
     );
 
+    let bank_bar = ProgressBar::new_spinner();
+    let built = Instant::now();
+    let banks = [&train, &val].map(|data| {
+        feature_banks(&config, &state.model, data, |done| {
+            bank_bar.set_message(format!("feature banks: {done} of {} maps", data.maps.len()))
+        })
+    });
+    bank_bar.finish_and_clear();
+    if config.features == MapFeatures::Cached {
+        let bytes: usize = banks.iter().flatten().map(FeatureBank::memory_bytes).sum();
+        println!(
+            "feature banks of {} maps built in {:.1} s, {:.0} MB; the map encoder stays frozen",
+            banks[0].len() + banks[1].len(),
+            built.elapsed().as_secs_f64(),
+            bytes as f64 / 1e6
+        );
+    }
+    let ([train_banks, val_banks], (train, val)) = (&banks, (&train, &val));
     let pool = Workspaces::for_current_pool();
     let (mut buffers, mut grads) = (BatchBuffers::default(), GradBuffers::default());
     let bar = ProgressBar::new(config.train_steps).with_style(
@@ -96,13 +117,13 @@ pub fn run(args: TrainPfNetArgs) -> anyhow::Result<()> {
     bar.set_position(state.step);
     let mut since_log = (0.0, 0u64);
     while state.step < config.train_steps {
-        let loss = state.train_step(&config, &train, &mut buffers, &mut grads, &pool);
+        let loss = state.train_step(&config, (train, train_banks), &mut buffers, &mut grads, &pool);
         anyhow::ensure!(loss.is_finite(), "training diverged at step {}: loss {loss}", state.step);
         since_log = (since_log.0 + loss, since_log.1 + 1);
         bar.set_position(state.step);
         bar.set_message(format!("{:.4}", since_log.0 / since_log.1 as f64));
         if state.step % config.eval_every == 0 || state.step == config.train_steps {
-            let val_loss = validation_loss(&config, &state.model, &val, &mut buffers, &pool);
+            let val_loss = validation_loss(&config, &state.model, (val, val_banks), &mut buffers, &pool);
             let train_loss = since_log.0 / since_log.1 as f64;
             rows.push(LogRow {
                 step: state.step,

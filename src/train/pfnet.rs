@@ -12,14 +12,16 @@ use crate::compose::{LoadedScene, Pipeline, Scene, standard_registry};
 use crate::nn::adam::{Adam, AdamConfig};
 use crate::nn::checkpoint::Checkpoint;
 use crate::nn::pfnet::{
-    GradBuffers, LocalMapSpec, PfNet, PfNetConfig, PoseLoss, StepBatch, Workspaces, crop_local_maps,
+    FeatureBank, FeatureCacheSpec, GradBuffers, LocalMapSpec, MapInput, PfNet, PfNetConfig, PoseLoss,
+    StepBatch, Workspaces, crop_local_maps,
 };
-use crate::particles::map_view;
+use crate::particles::{MapFeatures, map_view};
 use crate::train::collect::load_collection;
 use crate::train::episodes::{EpisodeSet, RecordedEpisode, simulate_episodes};
 use crate::world::map::procedural::{ApartmentParams, Split};
 use crate::world::rng::stream;
 use crate::world::{Pose2, wrap_angle};
+use anyhow::Context;
 use rand::Rng;
 use rand::seq::SliceRandom;
 use rand_distr::{Distribution, Normal};
@@ -67,6 +69,17 @@ pub struct TrainPfNetConfig {
     /// A folder written by `apfn collect` to train on instead of simulating `train_episodes` on
     /// `train_maps` (validation is always simulated on unseen apartments).
     pub data: Option<String>,
+    /// A PF-net checkpoint to start from instead of fresh weights (fine-tuning; Adam starts
+    /// afresh), relative to the working directory.
+    pub init: Option<String>,
+    /// The particles' map features: `exact` (each local map through the map encoder, the paper)
+    /// or `cached` (crops of each map's feature banks, as `pfnet_likelihood` with `features:
+    /// cached` makes them). `cached` fine-tunes the observation encoder and the joint stage to
+    /// the cache's features; the map encoder stays frozen at `init`'s weights, so each map's
+    /// banks are built once.
+    pub features: MapFeatures,
+    /// The banks' orientations (as `pfnet_likelihood`'s `cache`), with `features: cached`.
+    pub cache: FeatureCacheSpec,
 }
 
 impl Default for TrainPfNetConfig {
@@ -91,6 +104,9 @@ impl Default for TrainPfNetConfig {
             seed: 0,
             collect_schedule: "systems/collect_pfnet.ron".into(),
             data: None,
+            init: None,
+            features: MapFeatures::Exact,
+            cache: FeatureCacheSpec::default(),
         }
     }
 }
@@ -128,9 +144,24 @@ impl TrainPfNetConfig {
                 self.adam.learning_rate
             ));
         }
+        if self.features == MapFeatures::Cached && self.init.is_none() {
+            return Err("init: `features: cached` trains after a frozen map encoder, expected the \
+                        checkpoint whose encoder it keeps"
+                .into());
+        }
+        if !(1..=360).contains(&self.cache.orientations) {
+            return Err(format!("cache.orientations: expected 1 to 360, found {}", self.cache.orientations));
+        }
         PfNetConfig::named(&self.network)
             .map(|_| ())
             .ok_or_else(|| format!("network: expected `paper` or `compact`, found `{}`", self.network))
+    }
+
+    fn map_input(&self) -> MapInput {
+        match self.features {
+            MapFeatures::Exact => MapInput::LocalMaps,
+            MapFeatures::Cached => MapInput::Features,
+        }
     }
 
     /// The learning rate of gradient step `step` (0-based).
@@ -187,6 +218,25 @@ pub fn simulate_data(
     Ok([train, simulate(Split::Unseen, config.val_maps, config.val_episodes, 1)?])
 }
 
+/// The feature banks of every map of `data` with `features: cached` (none with `exact`), built
+/// with `model`'s map encoder; `progress` hears how many are done.
+pub fn feature_banks(
+    config: &TrainPfNetConfig,
+    model: &PfNet,
+    data: &EpisodeSet,
+    progress: impl Fn(usize),
+) -> Vec<FeatureBank> {
+    if config.features == MapFeatures::Exact {
+        return vec![];
+    }
+    let mut banks = Vec::with_capacity(data.maps.len());
+    for map in &data.maps {
+        banks.push(FeatureBank::build(model, &map_view(map), &config.cache));
+        progress(banks.len());
+    }
+    banks
+}
+
 /// A batch's tensors, rebuilt every step into the same buffers.
 #[derive(Default)]
 pub struct BatchBuffers {
@@ -197,20 +247,25 @@ pub struct BatchBuffers {
 }
 
 impl BatchBuffers {
-    /// Fills the buffers for `episodes` of `data`, particles drawn from `rng`.
+    /// Fills the buffers for `episodes` of `data` (with its maps' `banks` under `features:
+    /// cached`), particles drawn from `rng`.
     pub fn fill(
         &mut self,
         config: &TrainPfNetConfig,
         model: &PfNet,
-        data: &EpisodeSet,
+        (data, banks): (&EpisodeSet, &[FeatureBank]),
         episodes: &[usize],
         rng: &mut impl Rng,
     ) {
         let (k, t) = (config.particles, config.steps as usize);
         let grid = data.grid_cells * data.grid_cells;
         let n = episodes.len() * t;
+        let per_particle = match config.features {
+            MapFeatures::Exact => model.local_map_len(),
+            MapFeatures::Cached => model.map_feature_len(),
+        };
         self.obs.resize(n * model.obs_len(), 0.0);
-        self.maps.resize(n * k * model.local_map_len(), 0.0);
+        self.maps.resize(n * k * per_particle, 0.0);
         self.states.clear();
         self.targets.clear();
         let (std_m, std_rad) = (config.init_std_m, config.init_std_deg.to_radians());
@@ -234,16 +289,14 @@ impl BatchBuffers {
                     particles.iter().map(|p| p.y).collect(),
                     particles.iter().map(|p| p.yaw).collect(),
                 );
-                let len = k * model.local_map_len();
-                let out = &mut self.maps[s * len..(s + 1) * len];
-                crop_local_maps(
-                    &map_view(&data.maps[episode.map]),
-                    &xs,
-                    &ys,
-                    &yaws,
-                    &LocalMapSpec::default(),
-                    out,
-                );
+                let out = &mut self.maps[s * k * per_particle..(s + 1) * k * per_particle];
+                match config.features {
+                    MapFeatures::Exact => {
+                        let map = map_view(&data.maps[episode.map]);
+                        crop_local_maps(&map, &xs, &ys, &yaws, &LocalMapSpec::default(), out)
+                    }
+                    MapFeatures::Cached => banks[episode.map].crop_features(&xs, &ys, &yaws, out),
+                }
                 // Headings relative to the truth's, so the linear mean of the loss is taken
                 // where it is meaningful (the reference's linear mean breaks across ±π).
                 self.states
@@ -261,6 +314,7 @@ impl BatchBuffers {
             targets: &self.targets,
             k: config.particles,
             sequence: config.steps as usize,
+            input: config.map_input(),
         }
     }
 }
@@ -282,14 +336,14 @@ pub fn batch_episodes(config: &TrainPfNetConfig, episodes: usize, step: u64) -> 
 pub fn validation_loss(
     config: &TrainPfNetConfig,
     model: &PfNet,
-    data: &EpisodeSet,
+    (data, banks): (&EpisodeSet, &[FeatureBank]),
     buffers: &mut BatchBuffers,
     pool: &Workspaces,
 ) -> f64 {
     let all: Vec<usize> = (0..data.episodes.len()).collect();
     let mut total = 0.0;
     for (i, chunk) in all.chunks(config.batch).enumerate() {
-        buffers.fill(config, model, data, chunk, &mut stream(&[config.seed, 0x7A1, i as u64]));
+        buffers.fill(config, model, (data, banks), chunk, &mut stream(&[config.seed, 0x7A1, i as u64]));
         total += model.batch_loss(&buffers.batch(config), &config.loss(), pool) * chunk.len() as f64;
     }
     total / data.episodes.len() as f64
@@ -308,9 +362,21 @@ const ADAM_M: &str = "adam.m/";
 const ADAM_V: &str = "adam.v/";
 
 impl TrainState {
+    /// Fresh weights from the seed, or `config.init`'s (which must be of `config.network`).
     pub fn new(config: &TrainPfNetConfig) -> anyhow::Result<Self> {
         let network = PfNetConfig::named(&config.network).expect("checked");
-        let model = PfNet::new(network, config.seed).map_err(anyhow::Error::msg)?;
+        let model = match &config.init {
+            None => PfNet::new(network, config.seed).map_err(anyhow::Error::msg)?,
+            Some(path) => {
+                let model = PfNet::load(Path::new(path)).with_context(|| format!("init: {path}"))?;
+                anyhow::ensure!(
+                    model.config == network,
+                    "init: {path} holds another network than `network: {}`",
+                    config.network
+                );
+                model
+            }
+        };
         let adam = Adam::new(config.adam.clone(), model.params.len());
         Ok(Self { model, adam, step: 0, best_val_loss: f64::INFINITY })
     }
@@ -346,13 +412,19 @@ impl TrainState {
     pub fn train_step(
         &mut self,
         config: &TrainPfNetConfig,
-        data: &EpisodeSet,
+        (data, banks): (&EpisodeSet, &[FeatureBank]),
         buffers: &mut BatchBuffers,
         grads: &mut GradBuffers,
         pool: &Workspaces,
     ) -> f64 {
         let episodes = batch_episodes(config, data.episodes.len(), self.step);
-        buffers.fill(config, &self.model, data, &episodes, &mut stream(&[config.seed, 0xBA7C, self.step]));
+        buffers.fill(
+            config,
+            &self.model,
+            (data, banks),
+            &episodes,
+            &mut stream(&[config.seed, 0xBA7C, self.step]),
+        );
         self.adam.config.learning_rate = config.learning_rate_at(self.step);
         let loss = self.model.train_step(&buffers.batch(config), &config.loss(), &mut self.adam, grads, pool);
         self.step += 1;

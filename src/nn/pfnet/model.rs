@@ -20,6 +20,17 @@ pub struct PfNet {
     joint: Joint,
 }
 
+/// What a training step feeds the joint stage per particle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum MapInput {
+    /// [k][local_map_len] local maps, through the map encoder (the paper).
+    #[default]
+    LocalMaps,
+    /// [k][map_feature_len] map features made elsewhere (the feature cache's crops): the map
+    /// encoder is not run, and gets no gradient.
+    Features,
+}
+
 /// What one filter step's forward pass leaves for its backward.
 #[derive(Clone, Debug, Default)]
 pub struct StepActivations {
@@ -136,11 +147,23 @@ impl PfNet {
 
     /// One filter step's log-likelihoods for `k` particles sharing one observation, leaving the
     /// activations in `ws.acts` for `step_backward`.
-    pub fn step_forward<'w>(&self, obs: &[f32], maps: &[f32], k: usize, ws: &'w mut Workspace) -> &'w [f32] {
+    pub fn step_forward<'w>(
+        &self,
+        obs: &[f32],
+        (maps, input): (&[f32], MapInput),
+        k: usize,
+        ws: &'w mut Workspace,
+    ) -> &'w [f32] {
         let (p, acts) = (&self.params, &mut ws.acts);
         self.obs.forward(p, obs, 1, &mut acts.obs);
-        self.map.forward(p, maps, k, &mut acts.map);
-        self.fill_joint_input(&acts.map.features, &acts.obs.features, k, |_| 0, &mut acts.joint);
+        let map_features = match input {
+            MapInput::LocalMaps => {
+                self.map.forward(p, maps, k, &mut acts.map);
+                &acts.map.features
+            }
+            MapInput::Features => maps,
+        };
+        self.fill_joint_input(map_features, &acts.obs.features, k, |_| 0, &mut acts.joint);
         self.joint.forward(p, k, &mut acts.joint);
         &acts.joint.loglik[..k]
     }
@@ -151,7 +174,7 @@ impl PfNet {
     pub fn step_backward(
         &self,
         obs: &[f32],
-        maps: &[f32],
+        (maps, input): (&[f32], MapInput),
         k: usize,
         dloglik: &[f32],
         grads: &mut [f32],
@@ -171,7 +194,9 @@ impl PfNet {
                 *d += g;
             }
         }
-        self.map.backward(p, maps, k, &mut acts.map, dmap, grads);
+        if input == MapInput::LocalMaps {
+            self.map.backward(p, maps, k, &mut acts.map, dmap, grads);
+        }
         self.obs.backward(p, obs, 1, &mut acts.obs, dobs, grads);
     }
 
@@ -186,6 +211,7 @@ impl PfNet {
         grads: &mut [f32],
         ws: &mut Workspace,
     ) -> f64 {
+        let maps = (maps, MapInput::LocalMaps);
         let (value, dloglik) = loss(self.step_forward(obs, maps, k, ws));
         self.step_backward(obs, maps, k, &dloglik, grads, ws);
         value

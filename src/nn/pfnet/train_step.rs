@@ -6,7 +6,7 @@
 
 use super::batch::Workspaces;
 use super::loss::PoseLoss;
-use super::model::{PfNet, Workspace};
+use super::model::{MapInput, PfNet, Workspace};
 use crate::nn::adam::Adam;
 use rayon::prelude::*;
 
@@ -15,8 +15,9 @@ use rayon::prelude::*;
 pub struct StepBatch<'a> {
     /// [steps][obs_len]
     pub obs: &'a [f32],
-    /// [steps][k][local_map_len]
+    /// [steps][k][local_map_len], or [steps][k][map_feature_len] when `input` is `Features`
     pub maps: &'a [f32],
+    pub input: MapInput,
     /// [steps][k] particle poses (x, y, θ)
     pub states: &'a [[f32; 3]],
     /// [steps] true poses
@@ -150,9 +151,13 @@ impl PfNet {
         &batch.obs[s * self.obs_len()..(s + 1) * self.obs_len()]
     }
 
-    fn step_maps<'a>(&self, batch: &StepBatch<'a>, s: usize) -> &'a [f32] {
-        let len = self.local_map_len() * batch.k;
-        &batch.maps[s * len..(s + 1) * len]
+    fn step_maps<'a>(&self, batch: &StepBatch<'a>, s: usize) -> (&'a [f32], MapInput) {
+        let per_particle = match batch.input {
+            MapInput::LocalMaps => self.local_map_len(),
+            MapInput::Features => self.map_feature_len(),
+        };
+        let len = per_particle * batch.k;
+        (&batch.maps[s * len..(s + 1) * len], batch.input)
     }
 
     /// forward → loss → backward → Adam; returns the loss before the update.
@@ -191,8 +196,15 @@ mod tests {
     fn train_step_lowers_the_loss_on_a_fixed_batch() {
         let mut model = PfNet::new(PfNetConfig::compact(), 1).unwrap();
         let (obs, maps, states, targets) = batch_data(&model);
-        let batch =
-            StepBatch { obs: &obs, maps: &maps, states: &states, targets: &targets, k: 4, sequence: 3 };
+        let batch = StepBatch {
+            obs: &obs,
+            maps: &maps,
+            states: &states,
+            targets: &targets,
+            k: 4,
+            sequence: 3,
+            input: MapInput::LocalMaps,
+        };
         let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / 6.0 };
         let config = crate::nn::adam::AdamConfig { learning_rate: 1e-3, ..Default::default() };
         let mut adam = Adam::new(config, model.params.len());
@@ -219,6 +231,7 @@ mod tests {
             targets: &targets,
             k: 4,
             sequence,
+            input: MapInput::LocalMaps,
         };
         let gradient = |pool: &Workspaces| {
             let mut grads = GradBuffers::default();
@@ -231,12 +244,48 @@ mod tests {
     }
 
     #[test]
+    fn features_as_input_give_the_local_maps_gradient_with_a_frozen_map_encoder() {
+        // Fed the map encoder's own outputs, a `Features` batch must see the same loss and the
+        // same gradient for every weight after the encoder, and none for the encoder's weights.
+        let model = PfNet::new(PfNetConfig::compact(), 4).unwrap();
+        let (obs, maps, states, targets) = batch_data(&model);
+        let pool = Workspaces::for_current_pool();
+        let mut features = vec![0.0; 24 * model.map_feature_len()];
+        model.encode_local_maps_par(&maps, &mut features, &pool);
+        let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / 6.0 };
+        let run = |maps: &[f32], input| {
+            let batch =
+                StepBatch { obs: &obs, maps, states: &states, targets: &targets, k: 4, sequence: 3, input };
+            let mut grads = GradBuffers::default();
+            (model.batch_gradient(&batch, &loss, &mut grads, &pool), grads.total)
+        };
+        let (exact_loss, exact) = run(&maps, MapInput::LocalMaps);
+        let (feature_loss, frozen) = run(&features, MapInput::Features);
+        assert_eq!(exact_loss, feature_loss);
+        for (id, spec) in model.params.specs() {
+            let (want, got) = (model.params.of(&exact, id), model.params.of(&frozen, id));
+            if spec.name.starts_with("m_") || spec.name.starts_with("m2_") {
+                assert!(got.iter().all(|&g| g == 0.0), "{}: the map encoder must get no gradient", spec.name);
+            } else {
+                assert_eq!(got, want, "{}", spec.name);
+            }
+        }
+    }
+
+    #[test]
     fn sequence_gradient_matches_finite_differences() {
         // The loss through accumulated weights, differentiated numerically in one head weight.
         let model = PfNet::new(PfNetConfig::compact(), 2).unwrap();
         let (obs, maps, states, targets) = batch_data(&model);
-        let batch =
-            StepBatch { obs: &obs, maps: &maps, states: &states, targets: &targets, k: 4, sequence: 3 };
+        let batch = StepBatch {
+            obs: &obs,
+            maps: &maps,
+            states: &states,
+            targets: &targets,
+            k: 4,
+            sequence: 3,
+            input: MapInput::LocalMaps,
+        };
         let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / 6.0 };
         let (mut grads, pool) = (GradBuffers::default(), Workspaces::for_current_pool());
         model.batch_gradient(&batch, &loss, &mut grads, &pool);
