@@ -17,18 +17,23 @@ pub struct RewardParams {
     pub heading_weight: f32,
     /// Subtracted when the robot touched anything during the step (paper: 0.1).
     pub collision_penalty: f32,
+    /// Caps the pose loss Δx² + Δy² + w·Δθ² at this value (m²) before the penalty; `None`, the
+    /// paper's unbounded loss. Beyond the paper: a lost filter's loss is tens of m² per step, so
+    /// a few such episodes dominate every critic batch; a cap keeps the critics' targets in range.
+    pub max_loss: Option<f32>,
 }
 
 impl Default for RewardParams {
     fn default() -> Self {
-        Self { heading_weight: 0.36, collision_penalty: 0.1 }
+        Self { heading_weight: 0.36, collision_penalty: 0.1, max_loss: None }
     }
 }
 
 impl StepParams for RewardParams {
     fn check(&self) -> Result<(), String> {
         expect_param(self.heading_weight >= 0.0, "heading_weight", "≥ 0")?;
-        expect_param(self.collision_penalty >= 0.0, "collision_penalty", "≥ 0 (it is subtracted)")
+        expect_param(self.collision_penalty >= 0.0, "collision_penalty", "≥ 0 (it is subtracted)")?;
+        expect_param(self.max_loss.is_none_or(|m| m > 0.0), "max_loss", "a cap > 0 m², or None")
     }
 }
 
@@ -42,7 +47,8 @@ pub fn reward(estimate: &PoseEstimate, truth: &TruePose, collided: bool, params:
     let (e, t) = (estimate.pose, truth.0);
     let (dx, dy, dyaw) = (e.x - t.x, e.y - t.y, angle_error(e.yaw, t.yaw));
     let penalty = if collided { params.collision_penalty } else { 0.0 };
-    -(dx * dx + dy * dy + params.heading_weight * dyaw * dyaw) - penalty
+    let loss = dx * dx + dy * dy + params.heading_weight * dyaw * dyaw;
+    -params.max_loss.map_or(loss, |cap| loss.min(cap)) - penalty
 }
 
 /// Reads PoseEstimate, TruePose, Collided, EpisodeStart, RewardParams. Writes Reward.
@@ -74,6 +80,19 @@ mod tests {
             ..Default::default()
         };
         assert!(reward(&wrapped, &truth, false, &params).abs() < 1e-5, "headings wrap");
+    }
+
+    #[test]
+    fn a_capped_reward_stops_at_the_cap_and_still_pays_the_bump() {
+        let truth = TruePose(Pose2::new(0.0, 0.0, 0.0));
+        let lost = PoseEstimate { pose: Pose2::new(3.0, 4.0, 0.0), ..Default::default() };
+        let near = PoseEstimate { pose: Pose2::new(0.3, 0.4, 0.0), ..Default::default() };
+        let capped = RewardParams { max_loss: Some(2.0), ..Default::default() };
+        assert!((reward(&lost, &truth, false, &RewardParams::default()) + 25.0).abs() < 1e-4);
+        assert!((reward(&lost, &truth, false, &capped) + 2.0).abs() < 1e-6, "25 m² capped at 2");
+        assert!((reward(&lost, &truth, true, &capped) + 2.1).abs() < 1e-6, "the bump comes on top");
+        assert!((reward(&near, &truth, false, &capped) + 0.25).abs() < 1e-6, "below the cap: unchanged");
+        assert!(RewardParams { max_loss: Some(0.0), ..Default::default() }.check().is_err());
     }
 
     #[test]
