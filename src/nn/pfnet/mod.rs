@@ -20,7 +20,7 @@ pub use batch::{MAP_ENCODER_CHUNK, PARTICLE_CHUNK, Workspaces};
 pub use config::{ConvBranch, PfNetConfig};
 pub use feature_cache::{FeatureBank, FeatureCacheSpec};
 pub use loss::PoseLoss;
-pub use model::{MapInput, ParamCounts, PfNet, Workspace};
+pub use model::{MapInput, ParamCounts, PfNet, Workspace, is_map_encoder_param};
 pub use reference::{ReferenceError, VerifyReport, from_keras_layout, load_reference_model, verify};
 pub use saved::PfNetFileError;
 pub use spatial_transformer::{LocalMapSpec, MapView, crop_local_maps};

@@ -91,15 +91,18 @@ impl PfNet {
     }
 
     pub fn param_counts(&self) -> ParamCounts {
-        let count = |prefixes: &[&str]| {
+        let count = |part: fn(&str) -> bool| {
             self.params
                 .specs()
-                .filter(|(_, s)| prefixes.iter().any(|p| s.name.starts_with(p)))
+                .filter(|(_, s)| part(&s.name))
                 .map(|(_, s)| s.shape.iter().product::<usize>())
                 .sum()
         };
-        let (map_encoder, obs_encoder, joint) =
-            (count(&["m_", "m2_"]), count(&["o_", "o2_"]), count(&["j_"]));
+        let (map_encoder, obs_encoder, joint) = (
+            count(is_map_encoder_param),
+            count(|name| name.starts_with("o_") || name.starts_with("o2_")),
+            count(|name| name.starts_with("j_")),
+        );
         ParamCounts { map_encoder, obs_encoder, joint, total: self.params.len() }
     }
 
@@ -238,6 +241,11 @@ impl PfNet {
             row[m..].copy_from_slice(&obs_features[owner(i) * o..(owner(i) + 1) * o]);
         }
     }
+}
+
+/// Whether the parameter `name` belongs to the map encoder (the part `MapInput::Features` freezes).
+pub fn is_map_encoder_param(name: &str) -> bool {
+    name.starts_with("m_") || name.starts_with("m2_")
 }
 
 /// Pixels of a feature map where the two encoders meet (paper: 14 × 14).

@@ -178,34 +178,50 @@ impl PfNet {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::pfnet::PfNetConfig;
+    use crate::nn::pfnet::{PfNetConfig, is_map_encoder_param};
 
-    /// A tiny random batch: 2 sequences × 3 steps × 4 particles.
-    fn batch_data(model: &PfNet) -> (Vec<f32>, Vec<f32>, Vec<[f32; 3]>, Vec<[f32; 3]>) {
-        let values = crate::nn::gradcheck::test_values(6 * model.obs_len() + 24 * model.local_map_len(), 9);
-        let (obs, maps) = values.split_at(6 * model.obs_len());
-        let unit = |v: f32| (v + 1.0) / 2.0;
-        let obs = obs.iter().map(|&v| unit(v)).collect();
-        let maps = maps.iter().map(|&v| unit(v)).collect();
-        let states = (0..24).map(|i| [i as f32 * 0.1, 0.05 * (i % 5) as f32, 0.2 * (i % 3) as f32]).collect();
-        let targets = (0..6).map(|i| [0.5, 0.1 * i as f32, 0.1]).collect();
-        (obs, maps, states, targets)
+    /// A tiny random batch: 6 steps × 4 particles (2 sequences of 3 unless told otherwise).
+    struct TestBatch {
+        obs: Vec<f32>,
+        maps: Vec<f32>,
+        states: Vec<[f32; 3]>,
+        targets: Vec<[f32; 3]>,
     }
+
+    impl TestBatch {
+        fn new(model: &PfNet) -> Self {
+            let values =
+                crate::nn::gradcheck::test_values(6 * model.obs_len() + 24 * model.local_map_len(), 9);
+            let (obs, maps) = values.split_at(6 * model.obs_len());
+            let unit = |v: f32| (v + 1.0) / 2.0;
+            Self {
+                obs: obs.iter().map(|&v| unit(v)).collect(),
+                maps: maps.iter().map(|&v| unit(v)).collect(),
+                states: (0..24)
+                    .map(|i| [i as f32 * 0.1, 0.05 * (i % 5) as f32, 0.2 * (i % 3) as f32])
+                    .collect(),
+                targets: (0..6).map(|i| [0.5, 0.1 * i as f32, 0.1]).collect(),
+            }
+        }
+
+        /// Its local maps in sequences of `sequence` steps.
+        fn batch(&self, sequence: usize) -> StepBatch<'_> {
+            self.with_maps(&self.maps, MapInput::LocalMaps, sequence)
+        }
+
+        fn with_maps<'a>(&'a self, maps: &'a [f32], input: MapInput, sequence: usize) -> StepBatch<'a> {
+            let (obs, states, targets) = (&self.obs, &self.states, &self.targets);
+            StepBatch { obs, maps, states, targets, k: 4, sequence, input }
+        }
+    }
+
+    const LOSS: PoseLoss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / 6.0 };
 
     #[test]
     fn train_step_lowers_the_loss_on_a_fixed_batch() {
         let mut model = PfNet::new(PfNetConfig::compact(), 1).unwrap();
-        let (obs, maps, states, targets) = batch_data(&model);
-        let batch = StepBatch {
-            obs: &obs,
-            maps: &maps,
-            states: &states,
-            targets: &targets,
-            k: 4,
-            sequence: 3,
-            input: MapInput::LocalMaps,
-        };
-        let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / 6.0 };
+        let data = TestBatch::new(&model);
+        let (batch, loss) = (data.batch(3), LOSS);
         let config = crate::nn::adam::AdamConfig { learning_rate: 1e-3, ..Default::default() };
         let mut adam = Adam::new(config, model.params.len());
         let (mut grads, pool) = (GradBuffers::default(), Workspaces::for_current_pool());
@@ -222,24 +238,14 @@ mod tests {
         // A warm workspace holds the last batch's activations (and a longer sequence's); the
         // gradient must be the one a fresh workspace computes, bit for bit.
         let model = PfNet::new(PfNetConfig::compact(), 3).unwrap();
-        let (obs, maps, states, targets) = batch_data(&model);
-        let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / 6.0 };
-        let batch = |sequence| StepBatch {
-            obs: &obs,
-            maps: &maps,
-            states: &states,
-            targets: &targets,
-            k: 4,
-            sequence,
-            input: MapInput::LocalMaps,
-        };
+        let data = TestBatch::new(&model);
         let gradient = |pool: &Workspaces| {
             let mut grads = GradBuffers::default();
-            model.batch_gradient(&batch(2), &loss, &mut grads, pool);
+            model.batch_gradient(&data.batch(2), &LOSS, &mut grads, pool);
             grads.total
         };
         let warm = Workspaces::for_current_pool();
-        model.batch_gradient(&batch(6), &loss, &mut GradBuffers::default(), &warm);
+        model.batch_gradient(&data.batch(6), &LOSS, &mut GradBuffers::default(), &warm);
         assert_eq!(gradient(&warm), gradient(&Workspaces::for_current_pool()));
     }
 
@@ -248,23 +254,20 @@ mod tests {
         // Fed the map encoder's own outputs, a `Features` batch must see the same loss and the
         // same gradient for every weight after the encoder, and none for the encoder's weights.
         let model = PfNet::new(PfNetConfig::compact(), 4).unwrap();
-        let (obs, maps, states, targets) = batch_data(&model);
+        let data = TestBatch::new(&model);
         let pool = Workspaces::for_current_pool();
         let mut features = vec![0.0; 24 * model.map_feature_len()];
-        model.encode_local_maps_par(&maps, &mut features, &pool);
-        let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / 6.0 };
-        let run = |maps: &[f32], input| {
-            let batch =
-                StepBatch { obs: &obs, maps, states: &states, targets: &targets, k: 4, sequence: 3, input };
+        model.encode_local_maps_par(&data.maps, &mut features, &pool);
+        let run = |batch: StepBatch| {
             let mut grads = GradBuffers::default();
-            (model.batch_gradient(&batch, &loss, &mut grads, &pool), grads.total)
+            (model.batch_gradient(&batch, &LOSS, &mut grads, &pool), grads.total)
         };
-        let (exact_loss, exact) = run(&maps, MapInput::LocalMaps);
-        let (feature_loss, frozen) = run(&features, MapInput::Features);
+        let (exact_loss, exact) = run(data.batch(3));
+        let (feature_loss, frozen) = run(data.with_maps(&features, MapInput::Features, 3));
         assert_eq!(exact_loss, feature_loss);
         for (id, spec) in model.params.specs() {
             let (want, got) = (model.params.of(&exact, id), model.params.of(&frozen, id));
-            if spec.name.starts_with("m_") || spec.name.starts_with("m2_") {
+            if is_map_encoder_param(&spec.name) {
                 assert!(got.iter().all(|&g| g == 0.0), "{}: the map encoder must get no gradient", spec.name);
             } else {
                 assert_eq!(got, want, "{}", spec.name);
@@ -276,17 +279,8 @@ mod tests {
     fn sequence_gradient_matches_finite_differences() {
         // The loss through accumulated weights, differentiated numerically in one head weight.
         let model = PfNet::new(PfNetConfig::compact(), 2).unwrap();
-        let (obs, maps, states, targets) = batch_data(&model);
-        let batch = StepBatch {
-            obs: &obs,
-            maps: &maps,
-            states: &states,
-            targets: &targets,
-            k: 4,
-            sequence: 3,
-            input: MapInput::LocalMaps,
-        };
-        let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / 6.0 };
+        let data = TestBatch::new(&model);
+        let (batch, loss) = (data.batch(3), LOSS);
         let (mut grads, pool) = (GradBuffers::default(), Workspaces::for_current_pool());
         model.batch_gradient(&batch, &loss, &mut grads, &pool);
         let id = model.params.find("j_out/kernel").unwrap();
