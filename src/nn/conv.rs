@@ -209,6 +209,68 @@ impl Conv2d {
         self.forward_im2col(&g, weight, bias, x, y, y_channels, y_offset, scratch);
     }
 
+    /// Whether `forward_channel_last` / `backward_channel_last` (with dx if `with_dx`) run for this
+    /// conv on this CPU: AVX-512 and a stride > 1 'valid' conv whose output channels (and, for dx,
+    /// input channels) fill whole vectors.
+    pub fn runs_channel_last(&self, with_dx: bool) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return self.runs_strided(with_dx);
+        #[cfg(not(target_arch = "x86_64"))]
+        return false;
+    }
+
+    /// `forward` for chains of strided convs (SAC's encoders) that keep their activations
+    /// channel-last, so no layer transposes its output: x is [n][c_in][h][w], or [n][h][w][c_in]
+    /// if `x_channel_last`; writes y [n][oh][ow][c_out]. Only where `runs_channel_last(false)`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn forward_channel_last(
+        &self,
+        weight: &[f32],
+        bias: &[f32],
+        x: &[f32],
+        x_channel_last: bool,
+        n: usize,
+        (h, w): (usize, usize),
+        y: &mut [f32],
+        scratch: &mut Vec<f32>,
+    ) {
+        assert!(self.runs_channel_last(false), "{self:?} has no channel-last path on this CPU");
+        let g = self.geometry(h, w);
+        self.check_shapes(weight, x, n, &g, y.len(), (self.c_out, 0));
+        assert_eq!(bias.len(), self.c_out, "bias length");
+        #[cfg(target_arch = "x86_64")]
+        self.forward_strided_channel_last(&g, weight, bias, x, x_channel_last, n, y, scratch);
+    }
+
+    /// `backward` of `forward_channel_last`: dy is [n][oh][ow][c_out]; accumulates (+=) into
+    /// dweight, dbias and (if Some, which needs a channel-last x) dx [n][h][w][c_in].
+    #[allow(clippy::too_many_arguments)]
+    pub fn backward_channel_last(
+        &self,
+        weight: &[f32],
+        x: &[f32],
+        x_channel_last: bool,
+        n: usize,
+        (h, w): (usize, usize),
+        dy: &[f32],
+        dweight: &mut [f32],
+        dbias: &mut [f32],
+        dx: Option<&mut [f32]>,
+        scratch: &mut Vec<f32>,
+    ) {
+        assert!(self.runs_channel_last(dx.is_some()), "{self:?} has no channel-last path on this CPU");
+        assert!(dx.is_none() || x_channel_last, "dx comes out channel-last, so x must be");
+        let g = self.geometry(h, w);
+        self.check_shapes(weight, x, n, &g, dy.len(), (self.c_out, 0));
+        assert_eq!(dweight.len(), self.weight_len(), "dweight length");
+        assert_eq!(dbias.len(), self.c_out, "dbias length");
+        if let Some(dx) = dx.as_deref() {
+            assert_eq!(dx.len(), x.len(), "dx length");
+        }
+        #[cfg(target_arch = "x86_64")]
+        self.backward_strided_channel_last(&g, weight, x, x_channel_last, n, dy, dweight, dbias, dx, scratch);
+    }
+
     /// Groups of samples share one GEMM: W [c_out × K] · cols [K × G·P], then each sample's
     /// block is copied (plus bias) into its channel slice.
     #[allow(clippy::too_many_arguments)]
@@ -744,6 +806,62 @@ mod tests {
         }
         for ((got, want), what) in whole.iter().zip(&single).zip(["y", "dweight", "dbias", "dx"]) {
             assert_close(got, &f64s(want), 1e-6, what);
+        }
+    }
+
+    /// The channel-last path gives the channel-major path's y, dweight, dbias and dx, transposed:
+    /// from a channel-major x (an encoder's first layer, no dx) and from a channel-last one, over
+    /// several sample groups, with 16- and 32-channel tiles and pixel tails.
+    #[test]
+    fn channel_last_matches_channel_major() {
+        use Padding::Valid;
+        /// [n][c][p] → [n][p][c]
+        fn to_last(v: &[f32], n: usize, c: usize, p: usize) -> Vec<f32> {
+            (0..n * p * c).map(|j| v[(j / (p * c) * c + j % c) * p + j / c % p]).collect()
+        }
+        let shapes =
+            [(conv(4, 16, 3, 2, 1, Valid), 3, 27, false), (conv(16, 32, 3, 2, 1, Valid), 3, 23, true)];
+        for (seed, (c, n, side, x_last)) in (130..).zip(shapes) {
+            if !c.runs_channel_last(x_last) {
+                eprintln!("skipping: no channel-last path on this CPU");
+                return;
+            }
+            let ((oh, ow), hw) = (c.output_size(side, side), side * side);
+            let (wt, b) = (test_values(c.weight_len(), seed), test_values(c.c_out, seed + 1));
+            let x = test_values(n * c.c_in * hw, seed + 2);
+            let dy = test_values(n * c.c_out * oh * ow, seed + 3);
+            let mut scratch = Vec::new();
+            let mut y = vec![0.0; dy.len()];
+            c.forward(&wt, &b, &x, n, side, side, &mut y, c.c_out, 0, &mut scratch);
+            let (mut dw, mut db, mut dx) = (vec![0.0; wt.len()], vec![0.0; b.len()], vec![0.0; x.len()]);
+            let dx_major = x_last.then_some(&mut dx[..]);
+            c.backward(&wt, &x, n, side, side, &dy, c.c_out, 0, &mut dw, &mut db, dx_major, &mut scratch);
+
+            let x_in = if x_last { to_last(&x, n, c.c_in, hw) } else { x.clone() };
+            let dy_last = to_last(&dy, n, c.c_out, oh * ow);
+            let mut y_last = vec![f32::NAN; y.len()];
+            c.forward_channel_last(&wt, &b, &x_in, x_last, n, (side, side), &mut y_last, &mut scratch);
+            let (mut dw_l, mut db_l, mut dx_l) =
+                (vec![0.0; wt.len()], vec![0.0; b.len()], vec![0.0; x.len()]);
+            let dx_last = x_last.then_some(&mut dx_l[..]);
+            c.backward_channel_last(
+                &wt,
+                &x_in,
+                x_last,
+                n,
+                (side, side),
+                &dy_last,
+                &mut dw_l,
+                &mut db_l,
+                dx_last,
+                &mut scratch,
+            );
+            assert_close(&y_last, &f64s(&to_last(&y, n, c.c_out, oh * ow)), 1e-6, "y");
+            assert_close(&dw_l, &f64s(&dw), 1e-6, "dweight");
+            assert_close(&db_l, &f64s(&db), 1e-6, "dbias");
+            if x_last {
+                assert_close(&dx_l, &f64s(&to_last(&dx, n, c.c_in, hw)), 1e-6, "dx");
+            }
         }
     }
 

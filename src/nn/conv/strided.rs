@@ -35,6 +35,8 @@ pub struct Plan {
     pub w: usize,
     pub oh: usize,
     pub ow: usize,
+    /// x (and dy, dx) channel-last, `[n][h][w][c]`, instead of channel-major `[n][c][h][w]`.
+    pub channel_last: bool,
 }
 
 impl Plan {
@@ -50,17 +52,23 @@ impl Plan {
         self.oh * self.ow
     }
 
+    /// Steps in x between neighbouring channels and between neighbouring pixels.
+    fn x_strides(&self) -> (usize, usize) {
+        if self.channel_last { (1, self.c_in) } else { (self.h * self.w, 1) }
+    }
+
     /// Offset in x_n of tap `(c, ki, kj)` (index `(c·k + ki)·k + kj`) from its output pixel's origin.
     fn tap_offset(&self, tap: usize) -> usize {
         let (k, d) = (self.kernel, self.dilation);
         let (c, ki, kj) = (tap / (k * k), tap / k % k, tap % k);
-        (c * self.h + ki * d) * self.w + kj * d
+        let (channel, pixel) = self.x_strides();
+        c * channel + (ki * d * self.w + kj * d) * pixel
     }
 
     /// Offset in x of the top-left tap of output pixel `q` of the whole call (`q = i·P + oy·ow + ox`).
     fn origin(&self, q: usize) -> usize {
         let (i, r) = (q / self.pixels(), q % self.pixels());
-        i * self.x_len() + (r / self.ow * self.w + r % self.ow) * self.stride
+        i * self.x_len() + (r / self.ow * self.w + r % self.ow) * self.stride * self.x_strides().1
     }
 
     /// What the kernels' safety rests on: AVX-512F, a `lanes` side (c_out, or c_in for dx) of
@@ -112,11 +120,12 @@ impl Plan {
                 let mut acc: [[__m512; PX]; OB] =
                     block.map(|o| [unsafe { _mm512_loadu_ps(bias.as_ptr().add(o)) }; PX]);
                 // Taps in weight order, their offsets counted up rather than divided out.
+                let (channel, pixel) = self.x_strides();
                 let mut tap = 0;
                 for c in 0..self.c_in {
                     for ki in 0..k {
                         for kj in 0..k {
-                            let off = (c * self.h + ki * d) * self.w + kj * d;
+                            let off = c * channel + (ki * d * self.w + kj * d) * pixel;
                             let mut wv = [_mm512_setzero_ps(); OB];
                             for b in 0..OB {
                                 wv[b] =
@@ -177,13 +186,14 @@ impl Plan {
             for t0 in (0..taps).step_by(TB) {
                 let tap: [usize; TB] = std::array::from_fn(|t| (t0 + t).min(taps - 1));
                 let off = tap.map(|t| self.tap_offset(t));
+                let pixel = self.x_strides().1;
                 let mut acc = [[_mm512_setzero_ps(); TB]; OB];
                 // Pixels in dyt's order, their origins counted up rather than divided out.
                 let mut q = 0;
                 for i in 0..n {
                     for oy in 0..self.oh {
                         for ox in 0..self.ow {
-                            let origin = i * self.x_len() + (oy * self.w + ox) * self.stride;
+                            let origin = i * self.x_len() + (oy * self.w + ox) * self.stride * pixel;
                             let mut g = [_mm512_setzero_ps(); OB];
                             for b in 0..OB {
                                 g[b] =
@@ -211,7 +221,7 @@ impl Plan {
 
     /// dxt [n·h·w][c_in] += Σ_o Σ_(ki,kj) dy[i][o][pixel] · wx[(ki,kj)][o][c], each output pixel
     /// adding into the input pixels its taps read. wx is [k·k][c_out][c_in]; dy [n][y_channels][P]
-    /// is read at channels y_offset.. .
+    /// (channel-last: [n][P][y_channels]) is read at channels y_offset.. .
     pub fn backward_input(
         &self,
         wx: &[f32],
@@ -247,7 +257,12 @@ impl Plan {
         for c0 in (0..self.c_in).step_by(LANES) {
             for q0 in (0..total).step_by(PX) {
                 let q: [usize; PX] = std::array::from_fn(|j| (q0 + j).min(total - 1));
-                let dy_at = q.map(|q| (q / p * y_channels + y_offset) * p + q % p);
+                // dy of output channel o at pixel j: dy[dy_at[j] + o·o_step].
+                let (dy_at, o_step) = if self.channel_last {
+                    (q.map(|q| q * y_channels + y_offset), 1)
+                } else {
+                    (q.map(|q| (q / p * y_channels + y_offset) * p + q % p), p)
+                };
                 // Input pixel (of the whole call) of each output pixel's top-left tap.
                 let origin = q.map(|q| {
                     let (i, r) = (q / p, q % p);
@@ -259,7 +274,7 @@ impl Plan {
                     for o in 0..self.c_out {
                         let mut g = [_mm512_setzero_ps(); PX];
                         for j in 0..PX {
-                            g[j] = _mm512_set1_ps(unsafe { *dy.get_unchecked(dy_at[j] + o * p) });
+                            g[j] = _mm512_set1_ps(unsafe { *dy.get_unchecked(dy_at[j] + o * o_step) });
                         }
                         for t in 0..TB {
                             let wv = unsafe {
@@ -294,10 +309,85 @@ impl Conv2d {
             && super::direct::available()
     }
 
-    fn strided_plan(&self, g: &Geometry) -> Plan {
+    fn strided_plan(&self, g: &Geometry, channel_last: bool) -> Plan {
         let (c_in, c_out, kernel, stride, dilation) =
             (self.c_in, self.c_out, self.kernel, self.stride, self.dilation);
-        Plan { c_in, c_out, kernel, stride, dilation, h: g.h, w: g.w, oh: g.oh, ow: g.ow }
+        Plan { c_in, c_out, kernel, stride, dilation, h: g.h, w: g.w, oh: g.oh, ow: g.ow, channel_last }
+    }
+
+    /// wx [k·k][c_out][c_in] ← weight [c_out][c_in][k·k]: the layout `backward_input` reads.
+    fn weight_by_position(&self, weight: &[f32], wx: &mut [f32]) {
+        let kk = self.kernel * self.kernel;
+        for (o, w_o) in weight.chunks_exact(self.taps()).enumerate() {
+            for (c, w_oc) in w_o.chunks_exact(kk).enumerate() {
+                for (pos, &v) in w_oc.iter().enumerate() {
+                    wx[(pos * self.c_out + o) * self.c_in + c] = v;
+                }
+            }
+        }
+    }
+
+    /// `forward_channel_last` here: the kernel's pixel-major output is y itself.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn forward_strided_channel_last(
+        &self,
+        g: &Geometry,
+        weight: &[f32],
+        bias: &[f32],
+        x: &[f32],
+        x_channel_last: bool,
+        n: usize,
+        y: &mut [f32],
+        scratch: &mut Vec<f32>,
+    ) {
+        if n * g.pixels() == 0 {
+            return;
+        }
+        let [wt] = carve(scratch, [self.weight_len()]);
+        transpose(weight, self.c_out, self.taps(), wt, false);
+        self.strided_plan(g, x_channel_last).forward(wt, bias, x, n, y);
+    }
+
+    /// `backward_channel_last` here, per group of samples (so x and dy stay in cache across the
+    /// weight kernel's tap blocks): dy is already pixel-major for dweight, and dx comes out so.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn backward_strided_channel_last(
+        &self,
+        g: &Geometry,
+        weight: &[f32],
+        x: &[f32],
+        x_channel_last: bool,
+        n: usize,
+        dy: &[f32],
+        dweight: &mut [f32],
+        dbias: &mut [f32],
+        mut dx: Option<&mut [f32]>,
+        scratch: &mut Vec<f32>,
+    ) {
+        let (p, x_len) = (g.pixels(), self.c_in * g.h * g.w);
+        if n * p == 0 {
+            return;
+        }
+        let plan = self.strided_plan(g, x_channel_last);
+        let group = Self::strided_group(p * self.c_out + x_len, n);
+        let with_dx = usize::from(dx.is_some());
+        let [dwt, wx] = carve(scratch, [self.weight_len(), with_dx * self.weight_len()]);
+        dwt.fill(0.0);
+        if dx.is_some() {
+            self.weight_by_position(weight, wx);
+        }
+        for (first, x_g) in (0..n).step_by(group).zip(x.chunks(group * x_len)) {
+            let m = x_g.len() / x_len;
+            let dy_g = &dy[first * p * self.c_out..][..m * p * self.c_out];
+            plan.backward_weight(dy_g, x_g, m, dwt);
+            for row in dy_g.chunks_exact(self.c_out) {
+                dbias.iter_mut().zip(row).for_each(|(b, v)| *b += v);
+            }
+            if let Some(dx) = dx.as_deref_mut() {
+                plan.backward_input(wx, dy_g, m, (self.c_out, 0), &mut dx[first * x_len..][..m * x_len]);
+            }
+        }
+        transpose(dwt, self.taps(), self.c_out, dweight, true);
     }
 
     /// Samples per kernel call: enough that small outputs still make long pixel sequences, few
@@ -326,7 +416,7 @@ impl Conv2d {
         if n * p == 0 {
             return;
         }
-        let (plan, group) = (self.strided_plan(g), Self::strided_group(p * self.c_out, n));
+        let (plan, group) = (self.strided_plan(g, false), Self::strided_group(p * self.c_out, n));
         let [wt, yt] = carve(scratch, [self.weight_len(), group * p * self.c_out]);
         transpose(weight, self.c_out, self.taps(), wt, false);
         for (x_g, y_g) in x.chunks(group * x_len).zip(y.chunks_mut(group * y_channels * p)) {
@@ -355,27 +445,20 @@ impl Conv2d {
         mut dx: Option<&mut [f32]>,
         scratch: &mut Vec<f32>,
     ) {
-        let (p, taps, kk, x_len) =
-            (g.pixels(), self.taps(), self.kernel * self.kernel, self.c_in * g.h * g.w);
+        let (p, taps, x_len) = (g.pixels(), self.taps(), self.c_in * g.h * g.w);
         if n * p == 0 {
             return;
         }
         let dx_len = if dx.is_some() { x_len } else { 0 };
-        let (plan, group) = (self.strided_plan(g), Self::strided_group((p * self.c_out).max(dx_len), n));
+        let (plan, group) =
+            (self.strided_plan(g, false), Self::strided_group((p * self.c_out).max(dx_len), n));
         let [dyt, dwt, wx, dxt] = carve(
             scratch,
             [group * p * self.c_out, self.weight_len(), dx_len.min(1) * self.weight_len(), group * dx_len],
         );
         dwt.fill(0.0);
         if dx.is_some() {
-            // wx [k·k][c_out][c_in] = weight [c_out][c_in][k·k]
-            for (o, w_o) in weight.chunks_exact(taps).enumerate() {
-                for (c, w_oc) in w_o.chunks_exact(kk).enumerate() {
-                    for (pos, &v) in w_oc.iter().enumerate() {
-                        wx[(pos * self.c_out + o) * self.c_in + c] = v;
-                    }
-                }
-            }
+            self.weight_by_position(weight, wx);
         }
         for (first, x_g) in (0..n).step_by(group).zip(x.chunks(group * x_len)) {
             let m = x_g.len() / x_len;
