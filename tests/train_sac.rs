@@ -105,3 +105,24 @@ fn a_depth_reading_agent_trains_on_the_strip_the_depth_step_writes() {
         "{state:?}"
     );
 }
+
+/// Every training config in `scenes/` parses, passes its checks and builds its trainer (world,
+/// schedule, networks), so a documented `apfn train-sac --config scenes/…` starts.
+#[test]
+fn every_shipped_training_config_builds_its_trainer() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).expect("scenes/ exists") {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        if !(name.starts_with("train_sac_") && name.ends_with(".ron")) || name == "train_sac_world.ron" {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        let config: TrainSacConfig = ron::from_str(&text).unwrap_or_else(|e| panic!("{name}: {e}"));
+        config.check().unwrap_or_else(|e| panic!("{name}: {e}"));
+        SacTrainer::new(config, &path).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+        checked += 1;
+    }
+    assert!(checked >= 2, "scenes/ holds the paper's and the global training configs");
+}
