@@ -11,7 +11,9 @@
 //! 272 ms, with 4× smaller column groups 222 ms; this file ≈ 120 ms.
 //!
 //! Every kernel walks the pixels of all `n` samples as one sequence, so 2 × 2 outputs still fill
-//! whole register tiles. The outputs are pixel-major (`[pixel][channel]`); the callers transpose.
+//! whole register tiles. The outputs are pixel-major (`[pixel][channel]`): `forward_strided`
+//! transposes them into a channel-major y, `forward_strided_channel_last` hands them on as they
+//! are to a next layer that reads its x channel-last (`Plan::channel_last`).
 
 use std::arch::x86_64::{
     __m512, _mm512_add_ps, _mm512_fmadd_ps, _mm512_loadu_ps, _mm512_set1_ps, _mm512_setzero_ps,
