@@ -34,6 +34,8 @@ pub const BEAMS: Limit = Limit { min: 1, max: 100_000, expected: "1 to 100,000 b
 pub const RASTER_SIDE: Limit = Limit { min: 1, max: 1_024, expected: "1 to 1,024 cells per side" };
 /// Columns of the depth camera (paper: 56).
 pub const DEPTH_COLUMNS: Limit = Limit { min: 1, max: 4_096, expected: "1 to 4,096 columns" };
+/// Belief crops an agent reads (each 4 × 50 × 50 bytes per transition in the replay buffer).
+pub const BELIEF_MODES: Limit = Limit { min: 1, max: 16, expected: "1 to 16 crops" };
 /// Seeds of a sweep: one job per seed and cell.
 pub const SEEDS: Limit = Limit { min: 1, max: 10_000, expected: "1 to 10,000 seeds" };
 /// Independent copies of a scene run side by side (`apfn run --worlds`).

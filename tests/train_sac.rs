@@ -18,6 +18,7 @@ fn config(dir: &Path) -> (TrainSacConfig, PathBuf) {
         systems: repo.join("systems/apfn.ron"),
         network: "compact".into(),
         depth_columns: 0,
+        belief_modes: 1,
         agent: apfn::agent::sac::SacAgentConfig {
             buffer: 64,
             batch: 8,
@@ -104,6 +105,48 @@ fn a_depth_reading_agent_trains_on_the_strip_the_depth_step_writes() {
         state[4..12].iter().all(|d| (0.0..=1.0).contains(d)) && state[4..12].iter().any(|&d| d > 0.0),
         "{state:?}"
     );
+}
+
+#[test]
+fn a_multi_crop_agent_trains_on_the_crops_belief_crop_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut config, _) = config(dir.path());
+    let one_crop = std::fs::read_to_string(&config.systems).unwrap();
+    let three_crops =
+        one_crop.replacen("(\"belief_crop\",          ()),", "(\"belief_crop\", (modes: 3)),", 1);
+    assert_ne!(three_crops, one_crop, "systems/apfn.ron lists the belief_crop step as expected");
+    config.systems = dir.path().join("apfn_modes.ron");
+    std::fs::write(&config.systems, three_crops).unwrap();
+
+    config.belief_modes = 2;
+    let err = SacTrainer::new(config.clone(), &dir.path().join("train_mismatched.ron")).err().unwrap();
+    let err = format!("{err:#}");
+    assert!(err.contains("belief_modes: expected 3") && err.contains("apfn_modes.ron"), "{err}");
+
+    config.belief_modes = 3;
+    let path = dir.path().join("train_modes.ron");
+    std::fs::write(&path, ron::to_string(&config).unwrap()).unwrap();
+    let mut trainer = SacTrainer::new(config, &path).unwrap();
+    while trainer.step < 12 {
+        trainer.step();
+    }
+    let agent = trainer.agent();
+    assert!(agent.updates > 0, "the run must have trained");
+    assert_eq!(agent.learner.nets.config.belief_channels, 12, "3 crops of 4 channels");
+    let mut batch = apfn::agent::sac::SampledBatch::default();
+    agent.replay.sample(&[0, 1], &mut batch);
+    assert_eq!(batch.transitions().obs.belief.len(), 2 * 12 * 50 * 50);
+}
+
+#[test]
+fn a_belief_mode_count_out_of_range_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut config, _) = config(dir.path());
+    for modes in [0, 17] {
+        config.belief_modes = modes;
+        let err = config.check().unwrap_err();
+        assert!(err.contains("belief_modes") && err.contains("1 to 16"), "{err}");
+    }
 }
 
 /// Every training config in `scenes/` parses, passes its checks and builds its trainer (world,

@@ -10,6 +10,7 @@
 //! to continue exactly as the uninterrupted one.
 
 use crate::agent::sac::{SacAgent, SacAgentConfig};
+use crate::belief::{BELIEF_CHANNELS, BeliefParams};
 use crate::compose::{LoadedScene, Pipeline, Scene, standard_registry};
 use crate::episode::Episode;
 use crate::nn::checkpoint::Checkpoint;
@@ -38,6 +39,10 @@ pub struct TrainSacConfig {
     /// schedule must then run the `depth` step with as many `columns`.
     #[serde(default)]
     pub depth_columns: usize,
+    /// Belief crops the agent reads: the estimate's, then the next heaviest modes' (1, as the
+    /// paper); the schedule's `belief_crop` must then have as many `modes`.
+    #[serde(default = "one_crop")]
+    pub belief_modes: usize,
     #[serde(default)]
     pub agent: SacAgentConfig,
     /// World steps to train for (each moves every robot once).
@@ -59,7 +64,9 @@ impl TrainSacConfig {
         if self.depth_columns > 0 {
             crate::limits::DEPTH_COLUMNS.check("depth_columns", self.depth_columns)?;
         }
-        Ok(SacNetConfig { depth_columns: self.depth_columns, ..named })
+        crate::limits::BELIEF_MODES.check("belief_modes", self.belief_modes)?;
+        let belief_channels = BELIEF_CHANNELS * self.belief_modes;
+        Ok(SacNetConfig { depth_columns: self.depth_columns, belief_channels, ..named })
     }
 
     pub fn check(&self) -> Result<(), String> {
@@ -72,6 +79,10 @@ impl TrainSacConfig {
         positive(self.checkpoint_every, "checkpoint_every")?;
         positive(self.log_every, "log_every")
     }
+}
+
+fn one_crop() -> usize {
+    1
 }
 
 /// Names of the files of a run's resumable state.
@@ -121,6 +132,15 @@ impl SacTrainer {
         );
         let (mut app, robots) = headless_app(&loaded, pipeline)?;
         let net = config.net_config().map_err(anyhow::Error::msg)?;
+        // The schedule's crops must be the network's input; a mismatch would only warn per step.
+        let crops = app.world().get_resource::<BeliefParams>().map_or(1, |b| b.modes);
+        anyhow::ensure!(
+            crops == config.belief_modes,
+            "{}: belief_modes: expected {crops}, the `modes` of belief_crop in {}, got {}",
+            path.display(),
+            config.systems.display(),
+            config.belief_modes
+        );
         let agent =
             SacAgent::new(&net, config.agent.clone(), robots.len(), episode_steps as usize, config.seed);
         let agent = app.world_mut().spawn(agent).id();
