@@ -1,6 +1,7 @@
 //! SAC training end to end on a small world: a killed and resumed run writes the same
 //! checkpoint as an uninterrupted one.
 
+use apfn::agent::sac::SampledBatch;
 use apfn::train::sac::{STATE_FILE, SacTrainer, TrainSacConfig};
 use std::path::{Path, PathBuf};
 
@@ -73,32 +74,44 @@ fn resumed_training_writes_the_same_checkpoint() {
     assert_eq!(replays.len(), 1, "older replay buffers are removed once a newer state names its own");
 }
 
-#[test]
-fn a_depth_reading_agent_trains_on_the_strip_the_depth_step_writes() {
-    let dir = tempfile::tempdir().unwrap();
-    let (mut config, _) = config(dir.path());
-    let lidar_only = std::fs::read_to_string(&config.systems).unwrap();
-    let with_depth = lidar_only.replacen(
-        "(\"lidar\",                ()),",
-        "(\"lidar\", ()), (\"depth\", (columns: 8)),",
-        1,
-    );
-    assert_ne!(with_depth, lidar_only, "systems/apfn.ron lists the lidar step as expected");
-    config.systems = dir.path().join("apfn_depth.ron");
-    std::fs::write(&config.systems, with_depth).unwrap();
-    config.depth_columns = 8;
-    let path = dir.path().join("train_depth.ron");
-    std::fs::write(&path, ron::to_string(&config).unwrap()).unwrap();
+/// Points `config` at a copy of its schedule with the first `step` line replaced by `with`.
+fn edit_schedule(dir: &Path, config: &mut TrainSacConfig, step: &str, with: &str, name: &str) {
+    let original = std::fs::read_to_string(&config.systems).unwrap();
+    let edited = original.replacen(step, with, 1);
+    assert_ne!(edited, original, "systems/apfn.ron lists `{step}` as expected");
+    config.systems = dir.join(name);
+    std::fs::write(&config.systems, edited).unwrap();
+}
 
+/// Trains `config` (written to `dir/name`) for 12 world steps; returns two sampled transitions.
+fn train_and_sample(dir: &Path, config: TrainSacConfig, name: &str) -> (SacTrainer, SampledBatch) {
+    let path = dir.join(name);
+    std::fs::write(&path, ron::to_string(&config).unwrap()).unwrap();
     let mut trainer = SacTrainer::new(config, &path).unwrap();
     while trainer.step < 12 {
         trainer.step();
     }
-    let agent = trainer.agent();
-    assert!(agent.updates > 0, "the run must have trained");
-    assert_eq!(agent.learner.nets.config.depth_columns, 8);
-    let mut batch = apfn::agent::sac::SampledBatch::default();
-    agent.replay.sample(&[0, 1], &mut batch);
+    assert!(trainer.agent().updates > 0, "the run must have trained");
+    let mut batch = SampledBatch::default();
+    trainer.agent().replay.sample(&[0, 1], &mut batch);
+    (trainer, batch)
+}
+
+#[test]
+fn a_depth_reading_agent_trains_on_the_strip_the_depth_step_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut config, _) = config(dir.path());
+    let lidar = "(\"lidar\",                ()),";
+    edit_schedule(
+        dir.path(),
+        &mut config,
+        lidar,
+        "(\"lidar\", ()), (\"depth\", (columns: 8)),",
+        "apfn_depth.ron",
+    );
+    config.depth_columns = 8;
+    let (trainer, batch) = train_and_sample(dir.path(), config, "train_depth.ron");
+    assert_eq!(trainer.agent().learner.nets.config.depth_columns, 8);
     let state = batch.transitions().obs.state;
     assert_eq!(state.len(), 2 * (4 + 8), "robot state ⊕ 8 depth columns per observation");
     assert!(
@@ -111,12 +124,8 @@ fn a_depth_reading_agent_trains_on_the_strip_the_depth_step_writes() {
 fn a_multi_crop_agent_trains_on_the_crops_belief_crop_writes() {
     let dir = tempfile::tempdir().unwrap();
     let (mut config, _) = config(dir.path());
-    let one_crop = std::fs::read_to_string(&config.systems).unwrap();
-    let three_crops =
-        one_crop.replacen("(\"belief_crop\",          ()),", "(\"belief_crop\", (modes: 3)),", 1);
-    assert_ne!(three_crops, one_crop, "systems/apfn.ron lists the belief_crop step as expected");
-    config.systems = dir.path().join("apfn_modes.ron");
-    std::fs::write(&config.systems, three_crops).unwrap();
+    let crop = "(\"belief_crop\",          ()),";
+    edit_schedule(dir.path(), &mut config, crop, "(\"belief_crop\", (modes: 3)),", "apfn_modes.ron");
 
     config.belief_modes = 2;
     let err = SacTrainer::new(config.clone(), &dir.path().join("train_mismatched.ron")).err().unwrap();
@@ -124,17 +133,8 @@ fn a_multi_crop_agent_trains_on_the_crops_belief_crop_writes() {
     assert!(err.contains("belief_modes: expected 3") && err.contains("apfn_modes.ron"), "{err}");
 
     config.belief_modes = 3;
-    let path = dir.path().join("train_modes.ron");
-    std::fs::write(&path, ron::to_string(&config).unwrap()).unwrap();
-    let mut trainer = SacTrainer::new(config, &path).unwrap();
-    while trainer.step < 12 {
-        trainer.step();
-    }
-    let agent = trainer.agent();
-    assert!(agent.updates > 0, "the run must have trained");
-    assert_eq!(agent.learner.nets.config.belief_channels, 12, "3 crops of 4 channels");
-    let mut batch = apfn::agent::sac::SampledBatch::default();
-    agent.replay.sample(&[0, 1], &mut batch);
+    let (trainer, batch) = train_and_sample(dir.path(), config, "train_modes.ron");
+    assert_eq!(trainer.agent().learner.nets.config.belief_channels, 12, "3 crops of 4 channels");
     assert_eq!(batch.transitions().obs.belief.len(), 2 * 12 * 50 * 50);
 }
 
