@@ -28,6 +28,7 @@ fn config(dir: &Path) -> (TrainSacConfig, PathBuf) {
         },
         steps: 16,
         checkpoint_every: 8,
+        snapshot_every: None,
         log_every: 4,
         seed: 11,
     };
@@ -168,4 +169,50 @@ fn every_shipped_training_config_builds_its_trainer() {
         checked += 1;
     }
     assert!(checked >= 2, "scenes/ holds the paper's and the global training configs");
+}
+
+fn apfn(args: &[&str]) -> anyhow::Result<()> {
+    use clap::Parser;
+    apfn::cli::run(apfn::cli::Cli::try_parse_from(std::iter::once("apfn").chain(args.iter().copied()))?)
+}
+
+/// `apfn train-sac` keeps a policy every `snapshot_every` steps, extends a finished run when only
+/// `steps` grew, and refuses to resume under a config that would train differently.
+#[test]
+fn train_sac_keeps_snapshots_and_extends_a_finished_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut config, path) = config(dir.path());
+    let out = dir.path().join("run");
+    let train = |config: &TrainSacConfig, resume: bool| {
+        std::fs::write(&path, ron::to_string(config).unwrap()).unwrap();
+        let (path, out) = (path.to_str().unwrap(), out.to_str().unwrap());
+        let mut args = vec!["train-sac", "--config", path, "--out", out];
+        args.extend(resume.then_some("--resume"));
+        apfn(&args)
+    };
+    config.snapshot_every = Some(4);
+    train(&config, false).unwrap();
+    let kept = |step: u64| out.join(format!("policy_{step}.safetensors")).exists();
+    assert!([4, 8, 12, 16].into_iter().all(kept) && !kept(20), "a policy per 4 steps up to 16");
+    assert_eq!(
+        std::fs::read(out.join("policy_16.safetensors")).unwrap(),
+        std::fs::read(out.join("policy.safetensors")).unwrap(),
+        "the last snapshot is the last policy"
+    );
+
+    config.steps = 24;
+    train(&config, true).unwrap();
+    assert!(kept(20) && kept(24));
+    let log = std::fs::read_to_string(out.join("train_log.csv")).unwrap();
+    let steps: Vec<&str> = log.lines().skip(1).map(|l| l.split(',').next().unwrap()).collect();
+    assert_eq!(steps, ["4", "8", "12", "16", "20", "24"], "the extended run continues the log");
+
+    config.seed += 1;
+    let err = format!("{:#}", train(&config, true).unwrap_err());
+    assert!(err.contains("another config") && err.contains("train.ron"), "{err}");
+
+    config.seed -= 1;
+    config.steps = 26;
+    let err = format!("{:#}", train(&config, false).unwrap_err());
+    assert!(err.contains("steps: expected a multiple of the episode length (4 steps), got 26"), "{err}");
 }

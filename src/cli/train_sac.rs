@@ -1,7 +1,8 @@
 //! `apfn train-sac --config FILE.ron --out DIR [--resume]`: the APFN agent's training, with a
 //! progress bar (return, pose loss, steps/s), `train_log.csv`, `train_curves.png`, the latest
 //! policy (`policy.safetensors`, small) and the resumable state (`state.safetensors` with the
-//! replay buffer beside it), all written atomically.
+//! replay buffer beside it), all written atomically; with `snapshot_every`, a kept copy of the
+//! policy every so many steps (`policy_<step>.safetensors`).
 
 use crate::cli::set_threads;
 use crate::compose::read_ron;
@@ -23,7 +24,8 @@ pub struct TrainSacArgs {
     /// Folder for the policy, the state, the log and the curves (created if missing).
     #[arg(long)]
     pub out: PathBuf,
-    /// Continue from `<out>/state.safetensors` (the config must be the one it was trained with).
+    /// Continue from `<out>/state.safetensors` (the config must be the one it was trained with,
+    /// but for `steps` and `snapshot_every`: raise `steps` to extend a finished run).
     #[arg(long)]
     pub resume: bool,
     /// Worker threads (default: all cores); the same seed and thread count give the same bytes.
@@ -100,6 +102,9 @@ pub fn run(args: TrainSacArgs) -> anyhow::Result<()> {
             trainer.agent().learner.nets.save(&args.out.join("policy.safetensors"))?;
             write_log(&log_path, &rows)?;
             write_curves(&args.out, &rows, &trainer)?;
+        }
+        if let Some(name) = trainer.snapshot_due() {
+            trainer.agent().learner.nets.save(&args.out.join(name))?;
         }
     }
     bar.finish_and_clear();

@@ -49,6 +49,11 @@ pub struct TrainSacConfig {
     pub steps: u64,
     /// World steps between resumable checkpoints; a multiple of the episode length.
     pub checkpoint_every: u64,
+    /// World steps between kept copies of the policy, `policy_<step>.safetensors` (none by
+    /// default): the last policy of a run is not always its best, and choosing one takes
+    /// hundreds of held-out episodes per checkpoint (`docs/results/sac_global_cap/`).
+    #[serde(default)]
+    pub snapshot_every: Option<u64>,
     /// World steps between rows of the training log.
     pub log_every: u64,
     pub seed: u64,
@@ -77,6 +82,9 @@ impl TrainSacConfig {
         };
         positive(self.steps, "steps")?;
         positive(self.checkpoint_every, "checkpoint_every")?;
+        if let Some(every) = self.snapshot_every {
+            positive(every, "snapshot_every")?;
+        }
         positive(self.log_every, "log_every")
     }
 }
@@ -124,12 +132,14 @@ impl SacTrainer {
             );
         }
         let episode_steps = u64::from(loaded.scene.episode.steps);
-        anyhow::ensure!(
-            config.checkpoint_every.is_multiple_of(episode_steps),
-            "{}: checkpoint_every: expected a multiple of the episode length ({episode_steps} steps), got {}",
-            path.display(),
-            config.checkpoint_every
-        );
+        // State is saved at episode boundaries only, and the last step always saves it.
+        for (field, value) in [("checkpoint_every", config.checkpoint_every), ("steps", config.steps)] {
+            anyhow::ensure!(
+                value.is_multiple_of(episode_steps),
+                "{}: {field}: expected a multiple of the episode length ({episode_steps} steps), got {value}",
+                path.display(),
+            );
+        }
         let (mut app, robots) = headless_app(&loaded, pipeline)?;
         let net = config.net_config().map_err(anyhow::Error::msg)?;
         // The schedule's crops must be the network's input; a mismatch would only warn per step.
@@ -147,15 +157,21 @@ impl SacTrainer {
         Ok(Self { config, app, robots, agent, episode_steps, step: 0 })
     }
 
-    /// The run saved in `dir`, ready to continue.
+    /// The run saved in `dir`, ready to continue; `steps` and `snapshot_every` may differ from
+    /// the saved config (to extend a finished run), nothing that changes training may.
     pub fn resume(config: TrainSacConfig, path: &Path, dir: &Path) -> anyhow::Result<Self> {
         let mut trainer = Self::new(config, path)?;
         let state = dir.join(STATE_FILE);
         let file = Checkpoint::load(&state)?;
         let saved = file.metadata.get(CONFIG_KEY).map(String::as_str).unwrap_or_default();
+        let same_training = ron::from_str::<TrainSacConfig>(saved).is_ok_and(|saved| {
+            let current = &trainer.config;
+            TrainSacConfig { steps: current.steps, snapshot_every: current.snapshot_every, ..saved }
+                == *current
+        });
         anyhow::ensure!(
-            ron::from_str::<TrainSacConfig>(saved).ok().as_ref() == Some(&trainer.config),
-            "--resume: {} was trained with another config than {}",
+            same_training,
+            "--resume: {} was trained with another config than {} (only `steps` and `snapshot_every` may change)",
             state.display(),
             path.display()
         );
@@ -218,6 +234,12 @@ impl SacTrainer {
     /// Whether a resumable checkpoint is due after this step.
     pub fn checkpoint_due(&self) -> bool {
         self.step.is_multiple_of(self.config.checkpoint_every) || self.step == self.config.steps
+    }
+
+    /// The file name of the policy kept after this step, if `snapshot_every` asks for one.
+    pub fn snapshot_due(&self) -> Option<String> {
+        let every = self.config.snapshot_every?;
+        self.step.is_multiple_of(every).then(|| format!("policy_{}.safetensors", self.step))
     }
 
     /// Writes the resumable state (learner, replay buffer, counters) into `dir`, atomically per file.
