@@ -756,8 +756,8 @@ mod tests {
 
     /// The channels-in-lanes strided path (`strided.rs`): SAC's odd sizes 27 → 13 → 6 → 2 with
     /// c_in = 1 (only its dweight runs there: dx needs c_in in whole vectors, so it takes im2col)
-    /// and c_in > 16, 16-channel tiles (c_out 16) and a 32-channel tile with a tail (48), pixel
-    /// tails, dilation 2, stride 3, n up to 3, into channel slices.
+    /// and c_in > 16, 16-channel tiles (c_out 16), a 32-channel tile with a tail (48), a 64-channel
+    /// tile (64), pixel tails, dilation 2, stride 3, n up to 3, into channel slices.
     #[test]
     fn strided_kernel_shapes() {
         use Padding::Valid;
@@ -768,6 +768,7 @@ mod tests {
             (conv(16, 48, 3, 2, 1, Valid), 1, 7, 8, (50, 1)),
             (conv(16, 32, 3, 2, 2, Valid), 2, 11, 9, (32, 0)),
             (conv(16, 16, 2, 3, 1, Valid), 1, 8, 10, (17, 1)),
+            (conv(16, 64, 3, 2, 1, Valid), 1, 7, 8, (70, 3)),
         ];
         for (seed, (c, n, h, w, slice)) in (110..).zip(shapes) {
             #[cfg(target_arch = "x86_64")]
@@ -811,7 +812,7 @@ mod tests {
 
     /// The channel-last path gives the channel-major path's y, dweight, dbias and dx, transposed:
     /// from a channel-major x (an encoder's first layer, no dx) and from a channel-last one, over
-    /// several sample groups, with 16- and 32-channel tiles and pixel tails.
+    /// several sample groups, with 16-, 32- and 64-channel tiles and pixel tails.
     #[test]
     fn channel_last_matches_channel_major() {
         use Padding::Valid;
@@ -819,8 +820,11 @@ mod tests {
         fn to_last(v: &[f32], n: usize, c: usize, p: usize) -> Vec<f32> {
             (0..n * p * c).map(|j| v[(j / (p * c) * c + j % c) * p + j / c % p]).collect()
         }
-        let shapes =
-            [(conv(4, 16, 3, 2, 1, Valid), 3, 27, false), (conv(16, 32, 3, 2, 1, Valid), 3, 23, true)];
+        let shapes = [
+            (conv(4, 16, 3, 2, 1, Valid), 3, 27, false),
+            (conv(16, 32, 3, 2, 1, Valid), 3, 23, true),
+            (conv(32, 64, 3, 2, 1, Valid), 2, 13, true),
+        ];
         for (seed, (c, n, side, x_last)) in (130..).zip(shapes) {
             if !c.runs_channel_last(x_last) {
                 eprintln!("skipping: no channel-last path on this CPU");

@@ -67,10 +67,35 @@ impl Plan {
         c * channel + (ki * d * self.w + kj * d) * pixel
     }
 
-    /// Offset in x of the top-left tap of output pixel `q` of the whole call (`q = i·P + oy·ow + ox`).
-    fn origin(&self, q: usize) -> usize {
-        let (i, r) = (q / self.pixels(), q % self.pixels());
-        i * self.x_len() + (r / self.ow * self.w + r % self.ow) * self.stride * self.x_strides().1
+    /// (sample, oy, ox) of the call's output pixels q0, q0 + 1, … (`q = i·P + oy·ow + ox`), the
+    /// tail past `total` clamped to the last pixel. Counted up from q0: divisions per pixel cost
+    /// as much as a first layer's arithmetic (9 taps of one input channel).
+    fn pixel_coords<const PX: usize>(&self, q0: usize, total: usize) -> [(usize, usize, usize); PX] {
+        let (mut i, r) = (q0 / self.pixels(), q0 % self.pixels());
+        let (mut oy, mut ox) = (r / self.ow, r % self.ow);
+        std::array::from_fn(|j| {
+            let here = (i, oy, ox);
+            if q0 + j + 1 < total {
+                ox += 1;
+                if ox == self.ow {
+                    (ox, oy) = (0, oy + 1);
+                    if oy == self.oh {
+                        (oy, i) = (0, i + 1);
+                    }
+                }
+            }
+            here
+        })
+    }
+
+    /// Input pixel (of the whole call, `[n][h][w]`) of the top-left tap of output pixel (i, oy, ox).
+    fn origin_pixel(&self, (i, oy, ox): (usize, usize, usize)) -> usize {
+        (i * self.h + oy * self.stride) * self.w + ox * self.stride
+    }
+
+    /// Offset in x of the top-left tap of output pixel (i, oy, ox).
+    fn origin(&self, (i, oy, ox): (usize, usize, usize)) -> usize {
+        i * self.x_len() + (oy * self.w + ox) * self.stride * self.x_strides().1
     }
 
     /// What the kernels' safety rests on: AVX-512F, a `lanes` side (c_out, or c_in for dx) of
@@ -94,8 +119,10 @@ impl Plan {
         // every weight and bias load inside a multiple-of-16 channel block, every store inside
         // a pixel's row of yt.
         unsafe {
-            // Register tiles of 32 channels × 12 pixels, or 16 × 24: OB·PX + OB + 1 ≤ 32 zmm.
-            if self.c_out.is_multiple_of(2 * LANES) {
+            // Register tiles of 64 channels × 6 pixels, 32 × 12 or 16 × 24: OB·PX + OB + 1 ≤ 32 zmm.
+            if self.c_out.is_multiple_of(4 * LANES) {
+                self.forward_tiles::<4, 6>(wt, bias, x, n, yt);
+            } else if self.c_out.is_multiple_of(2 * LANES) {
                 self.forward_tiles::<2, 12>(wt, bias, x, n, yt);
             } else {
                 self.forward_tiles::<1, 24>(wt, bias, x, n, yt);
@@ -117,8 +144,7 @@ impl Plan {
         let (total, k, d) = (n * self.pixels(), self.kernel, self.dilation);
         for (ob, block) in output_blocks::<OB>(self.c_out) {
             for q0 in (0..total).step_by(PX) {
-                let q: [usize; PX] = std::array::from_fn(|j| (q0 + j).min(total - 1));
-                let origin = q.map(|q| self.origin(q));
+                let origin = self.pixel_coords::<PX>(q0, total).map(|at| self.origin(at));
                 let mut acc: [[__m512; PX]; OB] =
                     block.map(|o| [unsafe { _mm512_loadu_ps(bias.as_ptr().add(o)) }; PX]);
                 // Taps in weight order, their offsets counted up rather than divided out.
@@ -143,10 +169,10 @@ impl Plan {
                         }
                     }
                 }
-                for j in 0..PX.min(total - q0) {
-                    for b in 0..ob {
+                for (b, pixels) in acc.iter().enumerate().take(ob) {
+                    for (j, &sum) in pixels.iter().enumerate().take(total - q0) {
                         unsafe {
-                            _mm512_storeu_ps(yt.as_mut_ptr().add(q[j] * self.c_out + block[b]), acc[b][j])
+                            _mm512_storeu_ps(yt.as_mut_ptr().add((q0 + j) * self.c_out + block[b]), sum)
                         };
                     }
                 }
@@ -165,7 +191,9 @@ impl Plan {
         // SAFETY: as in `forward`; dyt and dwt are read and written in whole 16-channel blocks.
         unsafe {
             // Tiles of OB·16 channels × TB taps: OB·TB + OB + 1 ≤ 32 zmm.
-            if self.c_out.is_multiple_of(2 * LANES) {
+            if self.c_out.is_multiple_of(4 * LANES) {
+                self.weight_tiles::<4, 6>(dyt, x, n, dwt);
+            } else if self.c_out.is_multiple_of(2 * LANES) {
                 self.weight_tiles::<2, 12>(dyt, x, n, dwt);
             } else {
                 self.weight_tiles::<1, 24>(dyt, x, n, dwt);
@@ -240,7 +268,7 @@ impl Plan {
         );
         // SAFETY: `check` and the lengths above: dy reads stay in sample i's channel slice, wx and dxt
         // are read and written in whole 16-channel blocks of rows inside them.
-        unsafe { self.input_tiles::<2, 9>(wx, dy, n, (y_channels, y_offset), dxt) }
+        unsafe { self.input_tiles::<3, 9>(wx, dy, n, (y_channels, y_offset), dxt) }
     }
 
     /// A tile of 16 input channels × PX output pixels × TB kernel positions: per output channel,
@@ -258,18 +286,14 @@ impl Plan {
             (self.pixels(), n * self.pixels(), self.kernel * self.kernel, self.kernel, self.dilation);
         for c0 in (0..self.c_in).step_by(LANES) {
             for q0 in (0..total).step_by(PX) {
-                let q: [usize; PX] = std::array::from_fn(|j| (q0 + j).min(total - 1));
+                let coords = self.pixel_coords::<PX>(q0, total);
                 // dy of output channel o at pixel j: dy[dy_at[j] + o·o_step].
                 let (dy_at, o_step) = if self.channel_last {
-                    (q.map(|q| q * y_channels + y_offset), 1)
+                    (coords.map(|(i, oy, ox)| (i * p + oy * self.ow + ox) * y_channels + y_offset), 1)
                 } else {
-                    (q.map(|q| (q / p * y_channels + y_offset) * p + q % p), p)
+                    (coords.map(|(i, oy, ox)| (i * y_channels + y_offset) * p + oy * self.ow + ox), p)
                 };
-                // Input pixel (of the whole call) of each output pixel's top-left tap.
-                let origin = q.map(|q| {
-                    let (i, r) = (q / p, q % p);
-                    (i * self.h + r / self.ow * self.stride) * self.w + r % self.ow * self.stride
-                });
+                let origin = coords.map(|at| self.origin_pixel(at));
                 for t0 in (0..kk).step_by(TB) {
                     let pos: [usize; TB] = std::array::from_fn(|t| (t0 + t).min(kk - 1));
                     let mut acc = [[_mm512_setzero_ps(); TB]; PX];
