@@ -68,8 +68,8 @@ impl Plan {
     }
 
     /// (sample, oy, ox) of the call's output pixels q0, q0 + 1, … (`q = i·P + oy·ow + ox`), the
-    /// tail past `total` clamped to the last pixel. Counted up from q0: divisions per pixel cost
-    /// as much as a first layer's arithmetic (9 taps of one input channel).
+    /// tail past `total` clamped to the last pixel. Counted up from q0, not divided out per pixel:
+    /// a first layer's tile does only 9 taps of arithmetic per pixel.
     fn pixel_coords<const PX: usize>(&self, q0: usize, total: usize) -> [(usize, usize, usize); PX] {
         let (mut i, r) = (q0 / self.pixels(), q0 % self.pixels());
         let (mut oy, mut ox) = (r / self.ow, r % self.ow);
