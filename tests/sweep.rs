@@ -128,12 +128,16 @@ fn whole_sweep_matches_job_by_job_and_reruns_stale_jobs() {
         assert_eq!(row(&a, name), row(&b, name), "{name}: the parallel run and --job give the same numbers");
     }
 
-    // Changing what the jobs depend on (episode length, a step override) makes their results
-    // stale: merge refuses them.
+    // Changing what the jobs depend on (episode length, a step override, an inserted step)
+    // makes their results stale: merge refuses them.
     let original = std::fs::read_to_string(&file).unwrap();
     for changed in [
         original.replace("steps: 8", "steps: 9"),
         original.replace("steps: 8)", "steps: 8), overrides: [(\"resample\", (alpha: 1.0))]"),
+        original.replace(
+            "steps: 8)",
+            "steps: 8), inserts: [(\"mcl_likelihood_field\", \"augmented_recovery\", ())]",
+        ),
     ] {
         assert_ne!(changed, original);
         std::fs::write(&file, changed).unwrap();
