@@ -176,8 +176,8 @@ fn apfn(args: &[&str]) -> anyhow::Result<()> {
     apfn::cli::run(apfn::cli::Cli::try_parse_from(std::iter::once("apfn").chain(args.iter().copied()))?)
 }
 
-/// `apfn train-sac` keeps a policy every `snapshot_every` steps, extends a finished run when only
-/// `steps` grew, and refuses to resume under a config that would train differently.
+/// `apfn train-sac` keeps a policy every `snapshot_every` steps, extends a finished run exactly
+/// when only `steps` grew, and refuses to resume under a config that would train differently.
 #[test]
 fn train_sac_keeps_snapshots_and_extends_a_finished_run() {
     let dir = tempfile::tempdir().unwrap();
@@ -206,6 +206,17 @@ fn train_sac_keeps_snapshots_and_extends_a_finished_run() {
     let log = std::fs::read_to_string(out.join("train_log.csv")).unwrap();
     let steps: Vec<&str> = log.lines().skip(1).map(|l| l.split(',').next().unwrap()).collect();
     assert_eq!(steps, ["4", "8", "12", "16", "20", "24"], "the extended run continues the log");
+    let mut straight = SacTrainer::new(config.clone(), &path).unwrap();
+    while straight.step < 24 {
+        straight.step();
+    }
+    let straight_dir = dir.path().join("straight");
+    std::fs::create_dir_all(&straight_dir).unwrap();
+    straight.save_state(&straight_dir).unwrap();
+    assert!(
+        std::fs::read(out.join(STATE_FILE)).unwrap() == std::fs::read(straight_dir.join(STATE_FILE)).unwrap(),
+        "16 steps extended to 24 must end where 24 steps in one run end"
+    );
 
     config.seed += 1;
     let err = format!("{:#}", train(&config, true).unwrap_err());
