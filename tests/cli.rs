@@ -280,3 +280,13 @@ fn wrong_flag_is_a_usage_error() {
     let err = apfn(&["run", "--stepz", "3"]).unwrap_err().to_string();
     assert!(err.contains("--stepz"), "{err}");
 }
+
+/// The worker count is set once per process: asking again for the count it has is fine (a second
+/// command run from the library), another count is refused by name.
+#[test]
+fn threads_are_set_once_per_process() {
+    let running = rayon::current_num_threads();
+    apfn::cli::set_threads(Some(running)).expect("the count the process already has");
+    let err = apfn::cli::set_threads(Some(running + 1)).unwrap_err().to_string();
+    assert!(err.contains("--threads") && err.contains(&format!("already runs {running} worker")), "{err}");
+}

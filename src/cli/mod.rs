@@ -79,11 +79,18 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
-/// Sizes rayon's global pool; results never depend on it, only speed does.
+/// Sizes rayon's global pool. The pool is built once per process (by the first call, or by the
+/// first parallel work), so a later call, e.g. a second command run from the library, may only ask
+/// for the size it already has.
 pub fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
     if let Some(n) = threads {
         crate::limits::THREADS.check("--threads", n).map_err(anyhow::Error::msg)?;
-        rayon::ThreadPoolBuilder::new().num_threads(n).build_global()?;
+        let built = rayon::ThreadPoolBuilder::new().num_threads(n).build_global().is_ok();
+        let running = rayon::current_num_threads();
+        anyhow::ensure!(
+            built || running == n,
+            "--threads {n}: this process already runs {running} worker threads, and the count is set once per process"
+        );
     }
     Ok(())
 }
