@@ -42,6 +42,7 @@ fn run(
         inserts: Vec::new(),
         overrides: Vec::new(),
         localizer: None,
+        variants: Vec::new(),
     };
     let eval = config.into_loaded(Path::new("tests/ablations.ron")).unwrap_or_else(|e| panic!("{e}"));
     let cell = CellSpec { schedule: 0, task, group: 0 };

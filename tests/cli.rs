@@ -168,6 +168,43 @@ fn eval_inserts_add_a_step_to_every_schedule() {
     assert_ne!(column(&plain, 11), column(&augmented, 11), "recovery must change the global estimates");
 }
 
+/// A variant evaluates a schedule once more with one step's parameters replaced: its own row,
+/// labelled by schedule and variant, whose numbers are those of a schedule file with the change.
+#[test]
+fn eval_variants_add_a_row_per_schedule_and_variant() {
+    let dir = tempfile::tempdir().unwrap();
+    let eval = |name: &str, schedules: &str, variants: &str| {
+        let text = format!(
+            "Eval(schedules: [{schedules}], tasks: [global], maps: [Apartments(split: seen, count: 1)], \
+             episodes: 2, robots_per_map: 2, particles: Some(200), episode: (steps: 10), variants: [{variants}])"
+        );
+        let path = write(dir.path(), &format!("{name}.ron"), &text);
+        let out = dir.path().join(name);
+        apfn(&["eval", "--config", &path, "--out", out.to_str().unwrap()]).unwrap();
+        let json = std::fs::read_to_string(out.join("results.json")).unwrap();
+        let rows: Vec<serde_json::Value> = serde_json::from_str(&json).unwrap();
+        rows.iter()
+            .map(|r| (r["policy"].as_str().unwrap().to_owned(), r["mean_pos_err_m"].as_f64().unwrap()))
+            .collect::<Vec<_>>()
+    };
+    let rows = eval("variants", &format!("{SCHEDULE:?}"), "(\"resample\", \"every_step\", (alpha: 1.0))");
+    let policies: Vec<&str> = rows.iter().map(|r| r.0.as_str()).collect();
+    assert_eq!(policies, ["random (random)", "random (random+every_step)"]);
+
+    let edited = std::fs::read_to_string(SCHEDULE)
+        .unwrap()
+        .replace("(\"resample\",             (alpha: 0.5))", "(\"resample\", (alpha: 1.0))");
+    let copy = write(dir.path(), "every_step.ron", &edited);
+    assert_ne!(
+        edited,
+        std::fs::read_to_string(SCHEDULE).unwrap(),
+        "systems/random.ron resamples at alpha 0.5"
+    );
+    let alone = eval("copy", &format!("{copy:?}"), "");
+    assert_eq!(rows[1].1, alone[0].1, "the variant row is the edited schedule's");
+    assert_ne!(rows[0].1, rows[1].1, "resampling at every step changes the estimates");
+}
+
 #[test]
 fn broken_scene_names_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
@@ -258,6 +295,22 @@ fn bad_eval_configs_fail_before_any_work() {
                  inserts: [(\"mcl_beam_model\", \"augmented_recovery\", ())])"
             ),
             "inserts[0] (`augmented_recovery` after `mcl_beam_model`)",
+        ),
+        (
+            "variant of a step no schedule runs",
+            format!(
+                "Eval(schedules: [{SCHEDULE:?}], maps: [Apartments(split: seen, count: 1)], \
+                 variants: [(\"sac_policy\", \"step_8000\", ())])"
+            ),
+            "variants[0] (`step_8000`)`: no schedule of this config runs `sac_policy`",
+        ),
+        (
+            "variant named like a path",
+            format!(
+                "Eval(schedules: [{SCHEDULE:?}], maps: [Apartments(split: seen, count: 1)], \
+                 variants: [(\"resample\", \"../x\", (alpha: 1.0))])"
+            ),
+            "variants[0] (`../x`)`: expected a name of letters, digits",
         ),
         (
             "no tasks",

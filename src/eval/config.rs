@@ -65,6 +65,14 @@ pub struct EvalConfig {
     /// The localizer's name in the tables; `None` derives it from the schedules' likelihood step.
     #[serde(default)]
     pub localizer: Option<String>,
+    /// More rows: every schedule that runs the step is evaluated once more per variant, with the
+    /// step's parameters replaced (after `overrides`), its row labelled `<policy> (<schedule
+    /// file stem>+<name>)`.
+    /// `variants: [("sac_policy", "step_8000", (checkpoint: Some("runs/sac/policy_8000.safetensors")))]`
+    /// compares a training run's checkpoints in one table; `[("infogain_policy", "horizon_3",
+    /// (horizon_steps: 3))]` a parameter.
+    #[serde(default)]
+    pub variants: Vec<(String, String, Box<RawValue>)>,
 }
 
 fn all_tasks() -> Vec<Task> {
@@ -238,6 +246,30 @@ impl EvalConfig {
                 return Err(invalid(&field, format!("no schedule of this config runs `{at}`")));
             }
         }
+        let mut variants = Vec::new();
+        for (index, (step, name, params)) in self.variants.iter().enumerate() {
+            let field = format!("variants[{index}] (`{name}`)");
+            // The name becomes part of a file stem: the row's label, a sweep job's file name.
+            if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
+                return Err(invalid(&field, "expected a name of letters, digits, `_` and `-`".into()));
+            }
+            let before = variants.len();
+            for (path, pipeline) in &schedules {
+                let mut variant = pipeline.clone();
+                if variant
+                    .replace_step(step, step, params.get_ron(), &registry)
+                    .map_err(|m| invalid(&field, m))?
+                {
+                    let stem =
+                        path.file_stem().map_or("schedule".into(), |s| s.to_string_lossy().into_owned());
+                    variants.push((path.with_file_name(format!("{stem}+{name}.ron")), variant));
+                }
+            }
+            if variants.len() == before {
+                return Err(invalid(&field, format!("no schedule of this config runs `{step}`")));
+            }
+        }
+        schedules.extend(variants);
         let scenes = self
             .maps
             .iter()

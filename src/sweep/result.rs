@@ -76,7 +76,7 @@ pub fn job_status(sweep: &LoadedSweep, out: &Path, job: &Job) -> Result<JobStatu
 }
 
 /// Everything a job's numbers depend on, hashed: the schedule file's text, the task, the map
-/// group, the eval settings (swaps, inserts, overrides and labels included) and the seed. Other cells and seeds of the sweep do not enter, so
+/// group, the eval settings (swaps, inserts, overrides, variants and labels included) and the seed. Other cells and seeds of the sweep do not enter, so
 /// adding a seed or a schedule keeps the finished jobs.
 pub fn fingerprint(sweep: &LoadedSweep, job: &Job) -> Result<String, SweepError> {
     #[derive(Serialize)]
@@ -90,10 +90,13 @@ pub fn fingerprint(sweep: &LoadedSweep, job: &Job) -> Result<String, SweepError>
         episode: &'a crate::episode::EpisodeParams,
         robot: &'a crate::world::RobotParams,
         swaps: &'a [(String, String, Box<ron::value::RawValue>)],
-        // Left out when empty, so the fingerprints of sweeps without inserts stay as they were.
+        // Left out when empty (as `variants`), so the fingerprints of sweeps without them stay
+        // as they were.
         #[serde(skip_serializing_if = "<[_]>::is_empty")]
         inserts: &'a [(String, String, Box<ron::value::RawValue>)],
         overrides: &'a [(String, Box<ron::value::RawValue>)],
+        #[serde(skip_serializing_if = "<[_]>::is_empty")]
+        variants: &'a [(String, String, Box<ron::value::RawValue>)],
         localizer: &'a Option<String>,
         seed: u64,
     }
@@ -113,6 +116,7 @@ pub fn fingerprint(sweep: &LoadedSweep, job: &Job) -> Result<String, SweepError>
         swaps: &config.swaps,
         inserts: &config.inserts,
         overrides: &config.overrides,
+        variants: &config.variants,
         localizer: &config.localizer,
         seed: job.seed,
     };
