@@ -76,8 +76,9 @@ pub fn job_status(sweep: &LoadedSweep, out: &Path, job: &Job) -> Result<JobStatu
 }
 
 /// Everything a job's numbers depend on, hashed: the schedule file's text, the task, the map
-/// group, the eval settings (swaps, inserts, overrides, variants and labels included) and the seed. Other cells and seeds of the sweep do not enter, so
-/// adding a seed or a schedule keeps the finished jobs.
+/// group, the eval settings (swaps, inserts, overrides, variants and labels included) and the
+/// seed. Other cells and seeds of the sweep do not enter, so adding a seed or a schedule keeps the
+/// finished jobs (adding a variant reruns them: every job's hash holds all variants).
 pub fn fingerprint(sweep: &LoadedSweep, job: &Job) -> Result<String, SweepError> {
     #[derive(Serialize)]
     struct Inputs<'a> {
