@@ -28,7 +28,7 @@ fn likelihoods(c: &mut Criterion) {
         let bank = FeatureBank::build(&model, &map_view(&map), &FeatureCacheSpec::default());
         let mut rng = stream(&[5]);
         let obs: Vec<f32> = (0..model.obs_len()).map(|_| rng.random_range(0..3) as f32 / 2.0).collect();
-        let mut obs_features = vec![0.0; model.obs_feature_len()];
+        let mut obs_terms = vec![0.0; model.obs_term_len()];
         for k in [30, 300, 3000] {
             let xs: Vec<f32> = (0..k).map(|_| rng.random_range(0.0..width_m)).collect();
             let ys: Vec<f32> = (0..k).map(|_| rng.random_range(0.0..height_m)).collect();
@@ -40,16 +40,16 @@ fn likelihoods(c: &mut Criterion) {
             group.throughput(Throughput::Elements(k as u64));
             group.bench_function(BenchmarkId::new(format!("{name}_exact"), k), |b| {
                 b.iter(|| {
-                    model.encode_observations_par(&obs, &mut obs_features, &pool);
+                    model.observation_terms_par(&obs, &mut obs_terms, &pool);
                     crop_local_maps(&map_view(&map), &xs, &ys, &yaws, &LocalMapSpec::default(), &mut maps);
-                    model.log_likelihoods_exact(&obs_features, &owner, &maps, &mut loglik, &pool);
+                    model.log_likelihoods_exact(&obs_terms, &owner, &maps, &mut loglik, &pool);
                 })
             });
             group.bench_function(BenchmarkId::new(format!("{name}_cached"), k), |b| {
                 b.iter(|| {
-                    model.encode_observations_par(&obs, &mut obs_features, &pool);
+                    model.observation_terms_par(&obs, &mut obs_terms, &pool);
                     bank.crop_features(&xs, &ys, &yaws, &mut features);
-                    model.log_likelihoods_from_features(&obs_features, &owner, &features, &mut loglik, &pool);
+                    model.log_likelihoods_from_features(&obs_terms, &owner, &features, &mut loglik, &pool);
                 })
             });
         }

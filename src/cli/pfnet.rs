@@ -136,15 +136,15 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     } else {
         let k = args.particles;
         let owner = vec![0u32; k];
-        let (mut obs_features, mut loglik) = (vec![0.0; model.obs_feature_len()], vec![0.0; k]);
+        let (mut obs_terms, mut loglik) = (vec![0.0; model.obs_term_len()], vec![0.0; k]);
         let obs = uniform(model.obs_len());
         match args.features {
             // Local maps as network input, like the Keras peer's benchmark.
             MapFeatures::Exact => {
                 let maps = uniform(k * model.local_map_len());
                 time(args.reps, || {
-                    model.encode_observations_par(&obs, &mut obs_features, &pool);
-                    model.log_likelihoods_exact(&obs_features, &owner, &maps, &mut loglik, &pool);
+                    model.observation_terms_par(&obs, &mut obs_terms, &pool);
+                    model.log_likelihoods_exact(&obs_terms, &owner, &maps, &mut loglik, &pool);
                 })
             }
             MapFeatures::Cached => {
@@ -159,9 +159,9 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
                     poses[2 * k..].iter().map(|u| (u - 0.5) * std::f32::consts::TAU).collect();
                 let mut features = vec![0.0; k * model.map_feature_len()];
                 time(args.reps, || {
-                    model.encode_observations_par(&obs, &mut obs_features, &pool);
+                    model.observation_terms_par(&obs, &mut obs_terms, &pool);
                     bank.crop_features(&xs, &ys, &yaws, &mut features);
-                    model.log_likelihoods_from_features(&obs_features, &owner, &features, &mut loglik, &pool);
+                    model.log_likelihoods_from_features(&obs_terms, &owner, &features, &mut loglik, &pool);
                 })
             }
         }

@@ -21,6 +21,16 @@ const DOT_OUTPUTS: usize = 256;
 /// Samples per transpose tile: 16 f32 = one cache line of an `xt` row.
 const TILE: usize = 16;
 
+/// What a forward pass adds the patch products to.
+#[derive(Clone, Copy)]
+enum Start<'a> {
+    /// The bias `[pos][filter]`; x holds every input channel.
+    Bias(&'a [f32]),
+    /// Sample s starts from `base[group[s]]`; x holds the first `c_own` input channels
+    /// (see [`LocallyConnected2d::forward_own_channels`]).
+    Shared { base: &'a [f32], group: &'a [u32], c_own: usize },
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LocallyConnected2d {
     pub c_in: usize,
@@ -82,7 +92,33 @@ impl LocallyConnected2d {
         y_offset: usize,
         scratch: &mut Vec<f32>,
     ) {
-        self.forward_chunked(weight, bias, x, n, y, y_channels, y_offset, scratch, CHUNK);
+        assert_eq!(bias.len(), self.bias_len(), "bias length");
+        self.forward_chunked(weight, Start::Bias(bias), x, n, y, y_channels, y_offset, scratch, CHUNK);
+    }
+
+    /// `forward` for inputs whose channels `c_own..c_in` are shared by groups of samples (PF-net's
+    /// observation features, the same for every particle of a robot), so the products only cover
+    /// the first `c_own`: `x` holds those, `[n][c_own][h][w]`, and sample s starts from
+    /// `base[group[s]]` instead of the bias, where `base` (`[groups][y_channels][oh][ow]`, like y)
+    /// is `forward` of each group's shared channels with the own ones zero.
+    #[allow(clippy::too_many_arguments)]
+    pub fn forward_own_channels(
+        &self,
+        weight: &[f32],
+        x: &[f32],
+        c_own: usize,
+        base: &[f32],
+        group: &[u32],
+        y: &mut [f32],
+        y_channels: usize,
+        y_offset: usize,
+        scratch: &mut Vec<f32>,
+    ) {
+        assert!(c_own <= self.c_in, "own channels past c_in");
+        let sample = y_channels * self.positions();
+        assert!(group.iter().all(|&g| (g as usize + 1) * sample <= base.len()), "group past base");
+        let start = Start::Shared { base, group, c_own };
+        self.forward_chunked(weight, start, x, group.len(), y, y_channels, y_offset, scratch, CHUNK);
     }
 
     /// Accumulates into `dweight` `[pos][filter][patch]`, `dbias` `[pos][filter]` and `dx` (if given).
@@ -103,17 +139,19 @@ impl LocallyConnected2d {
         self.backward_chunked(weight, x, n, dy, y_channels, y_offset, dweight, dbias, dx, scratch, CHUNK);
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn check_shapes(
         &self,
         weight: &[f32],
         x: &[f32],
+        x_channels: usize,
         n: usize,
         y: &[f32],
         y_channels: usize,
         y_offset: usize,
     ) {
         assert_eq!(weight.len(), self.weight_len(), "weight length");
-        assert_eq!(x.len(), n * self.c_in * self.h * self.w, "x length");
+        assert_eq!(x.len(), n * x_channels * self.h * self.w, "x length");
         assert!(y_offset + self.filters <= y_channels, "channel slice past y_channels");
         assert_eq!(y.len(), n * y_channels * self.positions(), "y length");
     }
@@ -133,6 +171,27 @@ impl LocallyConnected2d {
     fn weight_block<'a>(&self, weight: &'a [f32], p: usize, kh: usize) -> MatRef<'a> {
         let (f, pl, kc) = (self.filters, self.patch_len(), self.kernel * self.c_in);
         view(&weight[p * f * pl + kh * kc..][..(f - 1) * pl + kc], f, kc, pl)
+    }
+
+    /// W_p's columns for the first `c_own` input channels, `filters × k·k·c_own` in (kh, kw, c)
+    /// order, and its row stride: `weight` itself when that is every channel, else a copy in `buf`.
+    fn own_weights<'a>(
+        &self,
+        weight: &'a [f32],
+        p: usize,
+        c_own: usize,
+        buf: &'a mut [f32],
+    ) -> (&'a [f32], usize) {
+        let (f, pl) = (self.filters, self.patch_len());
+        let w_p = &weight[p * f * pl..][..f * pl];
+        if c_own == self.c_in {
+            return (w_p, pl);
+        }
+        // Rows of W_p are [kh][kw][c_in]: every run of c_in columns keeps its first c_own.
+        for (dst, src) in buf.chunks_exact_mut(c_own).zip(w_p.chunks_exact(self.c_in)) {
+            dst.copy_from_slice(&src[..c_own]);
+        }
+        (buf, self.kernel * self.kernel * c_own)
     }
 
     /// Calls `f(xt row, NCHW offset within a sample)` for every interior cell and channel, in `xt`
@@ -198,7 +257,7 @@ impl LocallyConnected2d {
     fn forward_chunked(
         &self,
         weight: &[f32],
-        bias: &[f32],
+        start: Start<'_>,
         x: &[f32],
         n: usize,
         y: &mut [f32],
@@ -207,36 +266,63 @@ impl LocallyConnected2d {
         scratch: &mut Vec<f32>,
         chunk: usize,
     ) {
-        self.check_shapes(weight, x, n, y, y_channels, y_offset);
-        assert_eq!(bias.len(), self.bias_len(), "bias length");
+        let c_own = match start {
+            Start::Bias(_) => self.c_in,
+            Start::Shared { c_own, .. } => c_own,
+        };
+        self.check_shapes(weight, x, c_own, n, y, y_channels, y_offset);
         if n == 0 {
             return;
         }
-        let (npos, f, k, kc) = (self.positions(), self.filters, self.kernel, self.kernel * self.c_in);
+        // `own` lays out xt and its patch rows for the channels x holds.
+        let own = Self { c_in: c_own, ..*self };
+        let (npos, f, k, kc) = (self.positions(), self.filters, self.kernel, self.kernel * c_own);
         let ld = chunk.min(n);
-        let xt_len = self.xt_len(ld);
-        scratch.resize(xt_len + npos * f * ld, 0.0);
-        let (xt, yt) = scratch.split_at_mut(xt_len);
-        self.zero_padding_rows(xt, ld);
+        let xt_len = own.xt_len(ld);
+        let own_weights_len = if c_own < self.c_in { f * k * kc } else { 0 };
+        scratch.resize(xt_len + npos * f * ld + own_weights_len, 0.0);
+        let (xt, rest) = scratch.split_at_mut(xt_len);
+        let (yt, weight_buf) = rest.split_at_mut(npos * f * ld);
+        own.zero_padding_rows(xt, ld);
         for s0 in (0..n).step_by(ld) {
             let cs = ld.min(n - s0);
-            self.load_xt(x, s0, cs, xt, ld);
+            own.load_xt(x, s0, cs, xt, ld);
             // yt[(p·f + filter)·ld + j] = Σ_kh W_p[:, kh] · P_kh
             for p in 0..npos {
+                let (w_p, stride) = self.own_weights(weight, p, c_own, weight_buf);
                 for kh in 0..k {
-                    let patch = view(&xt[self.block_start(ld, p, kh)..][..kc * ld], kc, cs, ld);
+                    let patch = view(&xt[own.block_start(ld, p, kh)..][..kc * ld], kc, cs, ld);
                     let c = view_mut(&mut yt[p * f * ld..][..f * ld], f, cs, ld);
-                    matmul(c, self.weight_block(weight, p, kh), patch, kh > 0);
+                    matmul(c, view(&w_p[kh * kc..][..(f - 1) * stride + kc], f, kc, stride), patch, kh > 0);
                 }
             }
-            // Scatter (+ bias) into NCHW, a tile of samples at a time like `load_xt`.
             let ys = &mut y[(s0 * y_channels + y_offset) * npos..];
-            for j0 in (0..cs).step_by(TILE) {
-                for (r, &b) in bias.iter().enumerate() {
-                    let off = (j0 * y_channels + r % f) * npos + r / f;
-                    for (jj, &v) in yt[r * ld + j0..][..TILE.min(cs - j0)].iter().enumerate() {
-                        ys[off + jj * y_channels * npos] = v + b;
-                    }
+            match start {
+                Start::Bias(bias) => self.scatter(yt, ld, cs, ys, y_channels, |_, r| bias[r]),
+                Start::Shared { base, group, .. } => self.scatter(yt, ld, cs, ys, y_channels, |j, r| {
+                    base[((group[s0 + j] as usize * y_channels) + y_offset + r % f) * npos + r / f]
+                }),
+            }
+        }
+    }
+
+    /// yt `[(p·f + filter)·ld + j]` + `start(j, p·f + filter)` → NCHW `ys` (from the chunk's first
+    /// sample and the layer's channel slice), a tile of samples at a time like `load_xt`.
+    fn scatter(
+        &self,
+        yt: &[f32],
+        ld: usize,
+        cs: usize,
+        ys: &mut [f32],
+        y_channels: usize,
+        start: impl Fn(usize, usize) -> f32,
+    ) {
+        let (npos, f) = (self.positions(), self.filters);
+        for j0 in (0..cs).step_by(TILE) {
+            for r in 0..npos * f {
+                let off = (j0 * y_channels + r % f) * npos + r / f;
+                for (jj, &v) in yt[r * ld + j0..][..TILE.min(cs - j0)].iter().enumerate() {
+                    ys[off + jj * y_channels * npos] = v + start(j0 + jj, r);
                 }
             }
         }
@@ -257,7 +343,7 @@ impl LocallyConnected2d {
         scratch: &mut Vec<f32>,
         chunk: usize,
     ) {
-        self.check_shapes(weight, x, n, dy, y_channels, y_offset);
+        self.check_shapes(weight, x, self.c_in, n, dy, y_channels, y_offset);
         assert_eq!(dweight.len(), self.weight_len(), "dweight length");
         assert_eq!(dbias.len(), self.bias_len(), "dbias length");
         if let Some(dx) = dx.as_deref() {
@@ -392,7 +478,7 @@ mod tests {
         let r = test_values(n * yc * npos, 4);
         let mut scratch = vec![f32::NAN; 10_000];
         let mut y = vec![SENTINEL; n * yc * npos];
-        l.forward_chunked(&w, &b, &x, n, &mut y, yc, yo, &mut scratch, chunk);
+        l.forward_chunked(&w, Start::Bias(&b), &x, n, &mut y, yc, yo, &mut scratch, chunk);
         let (w64, b64, x64, r64) = (to64(&w), to64(&b), to64(&x), to64(&r));
         assert_close(&y, &naive(&l, &w64, &b64, &x64, n, yc, yo), 1e-5, "lc forward");
 
@@ -429,6 +515,43 @@ mod tests {
     fn many_filters_split_the_weight_gradient_into_slabs() {
         // 20 filters → slabs of 12 patch rows; k·c_in = 15 splits into 12 + 3.
         check(LocallyConnected2d { c_in: 5, filters: 20, kernel: 3, pad: 0, h: 3, w: 4 }, 3, 21, 1, 2);
+    }
+
+    /// `forward_own_channels` against the naive layer on the full input (own ⊕ the group's shared
+    /// channels), with chunks of 2 so that groups change inside and across chunks.
+    fn check_own_channels(l: LocallyConnected2d, c_own: usize, group: &[u32], yc: usize, yo: usize) {
+        let (n, groups, hw) = (group.len(), 1 + *group.iter().max().unwrap() as usize, l.h * l.w);
+        let c_shared = l.c_in - c_own;
+        let (w, b) = (test_values(l.weight_len(), 11), test_values(l.bias_len(), 12));
+        let (own, shared) = (test_values(n * c_own * hw, 13), test_values(groups * c_shared * hw, 14));
+        let mut full = Vec::new();
+        for (s, &g) in group.iter().enumerate() {
+            full.extend_from_slice(&own[s * c_own * hw..][..c_own * hw]);
+            full.extend_from_slice(&shared[g as usize * c_shared * hw..][..c_shared * hw]);
+        }
+        let mut zero_own = Vec::new();
+        for g in 0..groups {
+            zero_own.extend(std::iter::repeat_n(0.0, c_own * hw));
+            zero_own.extend_from_slice(&shared[g * c_shared * hw..][..c_shared * hw]);
+        }
+        let mut scratch = vec![f32::NAN; 10_000];
+        let mut base = vec![SENTINEL; groups * yc * l.positions()];
+        l.forward(&w, &b, &zero_own, groups, &mut base, yc, yo, &mut scratch);
+        let mut y = vec![SENTINEL; n * yc * l.positions()];
+        let start = Start::Shared { base: &base, group, c_own };
+        l.forward_chunked(&w, start, &own, n, &mut y, yc, yo, &mut scratch, 2);
+        let want = naive(&l, &to64(&w), &to64(&b), &to64(&full), n, yc, yo);
+        assert_close(&y, &want, 1e-5, "lc forward, own channels");
+    }
+
+    #[test]
+    fn shared_channels_enter_through_the_base() {
+        let l3 = LocallyConnected2d { c_in: 5, filters: 3, kernel: 3, pad: 0, h: 5, w: 6 };
+        check_own_channels(l3, 2, &[0, 0, 1, 0, 2], 7, 3);
+        let l5 = LocallyConnected2d { c_in: 4, filters: 2, kernel: 5, pad: 1, h: 5, w: 6 };
+        check_own_channels(l5, 1, &[1, 1, 0], 2, 0);
+        // Every channel own: the base is the bias, whatever the group.
+        check_own_channels(l5, 4, &[0, 1], 2, 0);
     }
 
     #[test]

@@ -103,7 +103,7 @@ pub struct PfNetState {
     /// Feature banks per map entity, built on first use.
     banks: HashMap<Entity, Arc<FeatureBank>>,
     obs: Vec<f32>,
-    obs_features: Vec<f32>,
+    obs_terms: Vec<f32>,
     owner: Vec<u32>,
     inputs: Vec<f32>,
     loglik: Vec<f32>,
@@ -165,16 +165,16 @@ pub fn pfnet_likelihood(
     }
 
     // One batched forward pass for the whole world.
-    state.obs_features.resize(robot_count * model.obs_feature_len(), 0.0);
-    model.encode_observations_par(&state.obs, &mut state.obs_features, pool);
+    state.obs_terms.resize(robot_count * model.obs_term_len(), 0.0);
+    model.observation_terms_par(&state.obs, &mut state.obs_terms, pool);
     state.loglik.resize(particles, 0.0);
     let (inputs, owner) = (&state.inputs[..particles * per_particle], &state.owner);
     match params.features {
         MapFeatures::Exact => {
-            model.log_likelihoods_exact(&state.obs_features, owner, inputs, &mut state.loglik, pool)
+            model.log_likelihoods_exact(&state.obs_terms, owner, inputs, &mut state.loglik, pool)
         }
         MapFeatures::Cached => {
-            model.log_likelihoods_from_features(&state.obs_features, owner, inputs, &mut state.loglik, pool)
+            model.log_likelihoods_from_features(&state.obs_terms, owner, inputs, &mut state.loglik, pool)
         }
     }
 
@@ -212,7 +212,7 @@ pub fn map_view(map: &NetworkMap) -> MapView<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::pfnet::Workspace;
+    use crate::nn::pfnet::{MapInput, Workspace};
     use crate::testing::tiny_room;
     use crate::world::Pose2;
     use bevy::ecs::system::RunSystemOnce;
@@ -250,11 +250,8 @@ mod tests {
         );
         let mut maps = vec![0.0; 3 * model.local_map_len()];
         crop_local_maps(&map_view(&map), &xs, &ys, &yaws, &LocalMapSpec::default(), &mut maps);
-        let (mut of, mut mf) = (vec![0.0; model.obs_feature_len()], vec![0.0; 3 * model.map_feature_len()]);
-        model.encode_observations(&grid.values, 1, &mut of, &mut ws);
-        model.encode_local_maps(&maps, 3, &mut mf, &mut ws);
-        let mut loglik = vec![0.0; 3];
-        model.joint_log_likelihoods(&mf, &of, &[0, 0, 0], &mut loglik, &mut ws);
+        // The training path: the joint stage on concatenated features, not the system's split one.
+        let loglik = model.step_forward(&grid.values, (&maps, MapInput::LocalMaps), 3, &mut ws);
         let total: f32 = loglik.iter().map(|l| l.exp()).sum();
         loglik.iter().map(|l| l.exp() / total).collect()
     }

@@ -35,11 +35,11 @@ impl Workspaces {
 }
 
 impl PfNet {
-    /// Observation features for `n` observations ([n][obs_len] → [n][obs_feature_len]), one per task.
-    pub fn encode_observations_par(&self, obs: &[f32], features: &mut [f32], pool: &Workspaces) {
-        let (len, flen) = (self.obs_len(), self.obs_feature_len());
-        features.par_chunks_mut(flen).zip(obs.par_chunks(len)).for_each(|(out, one)| {
-            pool.with(|ws| self.encode_observations(one, 1, out, ws));
+    /// Observation terms for `n` observations ([n][obs_len] → [n][obs_term_len]), one per task.
+    pub fn observation_terms_par(&self, obs: &[f32], terms: &mut [f32], pool: &Workspaces) {
+        let (len, tlen) = (self.obs_len(), self.obs_term_len());
+        terms.par_chunks_mut(tlen).zip(obs.par_chunks(len)).for_each(|(out, one)| {
+            pool.with(|ws| self.observation_terms(one, 1, out, ws));
         });
     }
 
@@ -56,11 +56,10 @@ impl PfNet {
     }
 
     /// Log-likelihoods of every particle from its local map (the paper's exact path): particle
-    /// i belongs to robot `owner[i]`, whose observation features are row `owner[i]` of
-    /// `obs_features`.
+    /// i belongs to robot `owner[i]`, whose observation terms are row `owner[i]` of `obs_terms`.
     pub fn log_likelihoods_exact(
         &self,
-        obs_features: &[f32],
+        obs_terms: &[f32],
         owner: &[u32],
         maps: &[f32],
         loglik: &mut [f32],
@@ -79,7 +78,7 @@ impl PfNet {
                     self.encode_local_maps(sub, sub.len() / len, part, ws);
                 }
                 let owners = &owner[first..first + out.len()];
-                self.joint_log_likelihoods(&features, obs_features, owners, out, ws);
+                self.joint_log_likelihoods(&features, obs_terms, owners, out, ws);
                 ws.chunk_map_features = features;
             });
         });
@@ -88,7 +87,7 @@ impl PfNet {
     /// Log-likelihoods from map features already at hand (the cached path), same ownership rule.
     pub fn log_likelihoods_from_features(
         &self,
-        obs_features: &[f32],
+        obs_terms: &[f32],
         owner: &[u32],
         map_features: &[f32],
         loglik: &mut [f32],
@@ -99,7 +98,7 @@ impl PfNet {
             let first = c * PARTICLE_CHUNK;
             let features = &map_features[first * flen..(first + out.len()) * flen];
             let owners = &owner[first..first + out.len()];
-            pool.with(|ws| self.joint_log_likelihoods(features, obs_features, owners, out, ws));
+            pool.with(|ws| self.joint_log_likelihoods(features, obs_terms, owners, out, ws));
         });
     }
 }

@@ -497,12 +497,12 @@ mod tests {
         }
         let obs: Vec<f32> = (0..model.obs_len()).map(|_| f32::from(rng.random_bool(0.2))).collect();
         let mut ws = Default::default();
-        let mut obs_features = vec![0.0; model.obs_feature_len()];
-        model.encode_observations(&obs, 1, &mut obs_features, &mut ws);
+        let mut obs_terms = vec![0.0; model.obs_term_len()];
+        model.observation_terms(&obs, 1, &mut obs_terms, &mut ws);
         let owner = vec![0u32; k];
         let mut loglik = |features: &[f32]| {
             let mut out = vec![0.0; k];
-            model.joint_log_likelihoods(features, &obs_features, &owner, &mut out, &mut ws);
+            model.joint_log_likelihoods(features, &obs_terms, &owner, &mut out, &mut ws);
             out
         };
         let exact_features = exact(&model, &view, &xs, &ys, &yaws);

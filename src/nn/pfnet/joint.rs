@@ -92,23 +92,93 @@ impl Joint {
         (self.map_channels + self.obs_channels) * self.side * self.side
     }
 
+    /// Values of one observation's terms (`observation_terms`).
+    pub fn term_len(&self) -> usize {
+        2 * self.lc3.0.filters * self.out_side * self.out_side
+    }
+
     /// acts.input [n][…] → acts.loglik [n].
     pub fn forward(&self, p: &Params, n: usize, acts: &mut JointActivations) {
-        let (o, q) = (self.out_side, self.pooled_side);
         let channels = 2 * self.lc3.0.filters;
-        sized(&mut acts.local, n * channels * o * o);
-        for (offset, (layer, w, b)) in [(0, &self.lc3), (self.lc3.0.filters, &self.lc5)] {
+        sized(&mut acts.local, n * channels * self.out_side * self.out_side);
+        for (offset, (layer, w, b)) in self.layers() {
+            let (w, b) = (p.get(*w), p.get(*b));
+            layer.forward(w, b, &acts.input, n, &mut acts.local, channels, offset, &mut acts.scratch);
+        }
+        self.head_forward(p, n, acts);
+    }
+
+    /// The observation's share of both locally-connected layers, bias included, for `n`
+    /// observations: features [n][obs_channels][side][side] → terms [n][term_len], what
+    /// `forward_shared` starts the particles of each observation from.
+    pub fn observation_terms(
+        &self,
+        p: &Params,
+        features: &[f32],
+        n: usize,
+        terms: &mut [f32],
+        acts: &mut JointActivations,
+    ) {
+        let (m, o) = (self.map_channels * self.side * self.side, self.obs_channels * self.side * self.side);
+        acts.input.clear();
+        for one in features.chunks_exact(o).take(n) {
+            acts.input.extend(std::iter::repeat_n(0.0, m));
+            acts.input.extend_from_slice(one);
+        }
+        let channels = 2 * self.lc3.0.filters;
+        for (offset, (layer, w, b)) in self.layers() {
+            let (w, b) = (p.get(*w), p.get(*b));
             layer.forward(
-                p.get(*w),
-                p.get(*b),
+                w,
+                b,
                 &acts.input,
                 n,
+                &mut terms[..n * self.term_len()],
+                channels,
+                offset,
+                &mut acts.scratch,
+            );
+        }
+    }
+
+    /// `forward` for particles sharing observations: map features [n][map_channels][side][side],
+    /// particle i's observation terms at row `owner[i]` of `terms` → acts.loglik [n]. The
+    /// locally-connected products then cover the map channels only (a third of the paper's).
+    pub fn forward_shared(
+        &self,
+        p: &Params,
+        map_features: &[f32],
+        terms: &[f32],
+        owner: &[u32],
+        acts: &mut JointActivations,
+    ) {
+        let (n, channels) = (owner.len(), 2 * self.lc3.0.filters);
+        sized(&mut acts.local, n * channels * self.out_side * self.out_side);
+        for (offset, (layer, w, _)) in self.layers() {
+            layer.forward_own_channels(
+                p.get(*w),
+                map_features,
+                self.map_channels,
+                terms,
+                owner,
                 &mut acts.local,
                 channels,
                 offset,
                 &mut acts.scratch,
             );
         }
+        self.head_forward(p, n, acts);
+    }
+
+    /// Both locally-connected layers with the channel slice of `local` each writes.
+    fn layers(&self) -> [(usize, &(LocallyConnected2d, ParamId, ParamId)); 2] {
+        [(0, &self.lc3), (self.lc3.0.filters, &self.lc5)]
+    }
+
+    /// After the locally-connected layers (acts.local): ReLU, pool, dense → acts.loglik.
+    fn head_forward(&self, p: &Params, n: usize, acts: &mut JointActivations) {
+        let (o, q) = (self.out_side, self.pooled_side);
+        let channels = 2 * self.lc3.0.filters;
         relu_forward(&mut acts.local);
         sized(&mut acts.pooled, n * channels * q * q);
         acts.argmax.resize(n * channels * q * q, 0);
@@ -139,7 +209,7 @@ impl Joint {
         zeroed(&mut a.grad_local, n * channels * o * o);
         relu_backward(&a.local, &a.grad_relu, &mut a.grad_local);
         zeroed(&mut a.dinput, n * self.input_len());
-        for (offset, (layer, w, b)) in [(0, &self.lc3), (self.lc3.0.filters, &self.lc5)] {
+        for (offset, (layer, w, b)) in self.layers() {
             let (dw, db) = p.pair_mut(grads, *w, *b);
             let weight = p.get(*w);
             layer.backward(

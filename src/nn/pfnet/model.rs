@@ -120,10 +120,19 @@ impl PfNet {
         self.obs.feature_len()
     }
 
-    /// obs [n][obs_len] → features [n][obs_feature_len].
-    pub fn encode_observations(&self, obs: &[f32], n: usize, features: &mut [f32], ws: &mut Workspace) {
-        self.obs.forward(&self.params, obs, n, &mut ws.acts.obs);
-        features.copy_from_slice(&ws.acts.obs.features[..n * self.obs_feature_len()]);
+    /// Values of one observation's share of the joint stage (`observation_terms`).
+    pub fn obs_term_len(&self) -> usize {
+        self.joint.term_len()
+    }
+
+    /// obs [n][obs_len] → terms [n][obs_term_len]: the observation encoder, then the observation
+    /// features' share of the joint stage's locally-connected layers, computed once per
+    /// observation instead of once per particle.
+    pub fn observation_terms(&self, obs: &[f32], n: usize, terms: &mut [f32], ws: &mut Workspace) {
+        let acts = &mut ws.acts;
+        self.obs.forward(&self.params, obs, n, &mut acts.obs);
+        let features = &acts.obs.features[..n * self.obs_feature_len()];
+        self.joint.observation_terms(&self.params, features, n, terms, &mut acts.joint);
     }
 
     /// local maps [n][local_map_len] → features [n][map_feature_len].
@@ -133,19 +142,18 @@ impl PfNet {
     }
 
     /// The joint stage for `owner.len()` particles: map features [n][map_feature_len], and
-    /// particle i's observation features at row `owner[i]` of `obs_features` → loglik [n].
+    /// particle i's observation terms at row `owner[i]` of `obs_terms` → loglik [n].
     pub fn joint_log_likelihoods(
         &self,
         map_features: &[f32],
-        obs_features: &[f32],
+        obs_terms: &[f32],
         owner: &[u32],
         loglik: &mut [f32],
         ws: &mut Workspace,
     ) {
-        let n = owner.len();
-        self.fill_joint_input(map_features, obs_features, n, |i| owner[i] as usize, &mut ws.acts.joint);
-        self.joint.forward(&self.params, n, &mut ws.acts.joint);
-        loglik.copy_from_slice(&ws.acts.joint.loglik[..n]);
+        let acts = &mut ws.acts.joint;
+        self.joint.forward_shared(&self.params, map_features, obs_terms, owner, acts);
+        loglik.copy_from_slice(&acts.loglik[..owner.len()]);
     }
 
     /// One filter step's log-likelihoods for `k` particles sharing one observation, leaving the
@@ -166,7 +174,7 @@ impl PfNet {
             }
             MapInput::Features => maps,
         };
-        self.fill_joint_input(map_features, &acts.obs.features, k, |_| 0, &mut acts.joint);
+        self.fill_joint_input(map_features, &acts.obs.features, k, &mut acts.joint);
         self.joint.forward(p, k, &mut acts.joint);
         &acts.joint.loglik[..k]
     }
@@ -231,14 +239,13 @@ impl PfNet {
         map_features: &[f32],
         obs_features: &[f32],
         n: usize,
-        owner: impl Fn(usize) -> usize,
         acts: &mut JointActivations,
     ) {
         let (m, o) = (self.map_feature_len(), self.obs_feature_len());
         acts.input.resize(n * (m + o), 0.0);
-        for (i, row) in acts.input.chunks_exact_mut(m + o).take(n).enumerate() {
-            row[..m].copy_from_slice(&map_features[i * m..(i + 1) * m]);
-            row[m..].copy_from_slice(&obs_features[owner(i) * o..(owner(i) + 1) * o]);
+        for (row, map) in acts.input.chunks_exact_mut(m + o).zip(map_features.chunks_exact(m)).take(n) {
+            row[..m].copy_from_slice(map);
+            row[m..].copy_from_slice(&obs_features[..o]);
         }
     }
 }

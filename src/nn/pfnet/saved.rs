@@ -77,11 +77,11 @@ mod tests {
         let obs: Vec<f32> = (0..model.obs_len()).map(|i| (i % 3) as f32 / 2.0).collect();
         let run = |m: &PfNet| {
             let mut ws = Workspace::default();
-            let (mut of, mut mf) = (vec![0.0; m.obs_feature_len()], vec![0.0; 2 * m.map_feature_len()]);
-            m.encode_observations(&obs, 1, &mut of, &mut ws);
+            let (mut terms, mut mf) = (vec![0.0; m.obs_term_len()], vec![0.0; 2 * m.map_feature_len()]);
+            m.observation_terms(&obs, 1, &mut terms, &mut ws);
             m.encode_local_maps(&maps, 2, &mut mf, &mut ws);
             let mut ll = vec![0.0; 2];
-            m.joint_log_likelihoods(&mf, &of, &[0, 0], &mut ll, &mut ws);
+            m.joint_log_likelihoods(&mf, &terms, &[0, 0], &mut ll, &mut ws);
             ll
         };
         assert_eq!(run(&loaded), run(&model), "a loaded network computes the same bytes");
