@@ -47,8 +47,11 @@ fn likelihoods(c: &mut Criterion) {
             });
             group.bench_function(BenchmarkId::new(format!("{name}_cached"), k), |b| {
                 b.iter(|| {
-                    model.observation_terms_par(&obs, &mut obs_terms, &pool);
-                    bank.crop_features(&xs, &ys, &yaws, &mut features);
+                    // As `pfnet_likelihood`: the observation is encoded while the crops are cut.
+                    rayon::join(
+                        || model.observation_terms_par(&obs, &mut obs_terms, &pool),
+                        || bank.crop_features(&xs, &ys, &yaws, &mut features),
+                    );
                     model.log_likelihoods_from_features(&obs_terms, &owner, &features, &mut loglik, &pool);
                 })
             });

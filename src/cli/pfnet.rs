@@ -159,8 +159,11 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
                     poses[2 * k..].iter().map(|u| (u - 0.5) * std::f32::consts::TAU).collect();
                 let mut features = vec![0.0; k * model.map_feature_len()];
                 time(args.reps, || {
-                    model.observation_terms_par(&obs, &mut obs_terms, &pool);
-                    bank.crop_features(&xs, &ys, &yaws, &mut features);
+                    // As `pfnet_likelihood`: the observation is encoded while the crops are cut.
+                    rayon::join(
+                        || model.observation_terms_par(&obs, &mut obs_terms, &pool),
+                        || bank.crop_features(&xs, &ys, &yaws, &mut features),
+                    );
                     model.log_likelihoods_from_features(&obs_terms, &owner, &features, &mut loglik, &pool);
                 })
             }

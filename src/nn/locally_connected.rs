@@ -21,6 +21,15 @@ const DOT_OUTPUTS: usize = 256;
 /// Samples per transpose tile: 16 f32 = one cache line of an `xt` row.
 const TILE: usize = 16;
 
+/// One chunk of samples in `xt` (`ld` columns, the first `cs` used) over the first `c_own` input channels.
+#[derive(Clone, Copy)]
+struct Chunk<'a> {
+    c_own: usize,
+    xt: &'a [f32],
+    ld: usize,
+    cs: usize,
+}
+
 /// What a forward pass adds the patch products to.
 #[derive(Clone, Copy)]
 enum Start<'a> {
@@ -99,8 +108,10 @@ impl LocallyConnected2d {
     /// `forward` for inputs whose channels `c_own..c_in` are shared by groups of samples (PF-net's
     /// observation features, the same for every particle of a robot), so the products only cover
     /// the first `c_own`: `x` holds those, `[n][c_own][h][w]`, and sample s starts from
-    /// `base[group[s]]` instead of the bias, where `base` (`[groups][y_channels][oh][ow]`, like y)
-    /// is `forward` of each group's shared channels with the own ones zero.
+    /// `base[group[s]]` instead of the bias, where `base` (`[groups][y_channels][oh][ow]`) is
+    /// `forward` of each group's shared channels with the own ones zero. y is laid out
+    /// `[oh·ow][y_channels][n]`, samples innermost: the products land there with no transpose,
+    /// and what follows (PF-net's pool and dense head) vectorizes across samples.
     #[allow(clippy::too_many_arguments)]
     pub fn forward_own_channels(
         &self,
@@ -270,6 +281,7 @@ impl LocallyConnected2d {
             Start::Bias(_) => self.c_in,
             Start::Shared { c_own, .. } => c_own,
         };
+        // Both layouts of y hold n × y_channels × positions values.
         self.check_shapes(weight, x, c_own, n, y, y_channels, y_offset);
         if n == 0 {
             return;
@@ -279,50 +291,81 @@ impl LocallyConnected2d {
         let (npos, f, k, kc) = (self.positions(), self.filters, self.kernel, self.kernel * c_own);
         let ld = chunk.min(n);
         let xt_len = own.xt_len(ld);
+        let yt_len = if matches!(start, Start::Bias(_)) { npos * f * ld } else { 0 };
         let own_weights_len = if c_own < self.c_in { f * k * kc } else { 0 };
-        scratch.resize(xt_len + npos * f * ld + own_weights_len, 0.0);
+        scratch.resize(xt_len + yt_len + own_weights_len, 0.0);
         let (xt, rest) = scratch.split_at_mut(xt_len);
-        let (yt, weight_buf) = rest.split_at_mut(npos * f * ld);
+        let (yt, weight_buf) = rest.split_at_mut(yt_len);
         own.zero_padding_rows(xt, ld);
         for s0 in (0..n).step_by(ld) {
             let cs = ld.min(n - s0);
             own.load_xt(x, s0, cs, xt, ld);
-            // yt[(p·f + filter)·ld + j] = Σ_kh W_p[:, kh] · P_kh
-            for p in 0..npos {
-                let (w_p, stride) = self.own_weights(weight, p, c_own, weight_buf);
-                for kh in 0..k {
-                    let patch = view(&xt[own.block_start(ld, p, kh)..][..kc * ld], kc, cs, ld);
-                    let c = view_mut(&mut yt[p * f * ld..][..f * ld], f, cs, ld);
-                    matmul(c, view(&w_p[kh * kc..][..(f - 1) * stride + kc], f, kc, stride), patch, kh > 0);
-                }
-            }
-            let ys = &mut y[(s0 * y_channels + y_offset) * npos..];
+            let chunk = Chunk { c_own, xt, ld, cs };
             match start {
-                Start::Bias(bias) => self.scatter(yt, ld, cs, ys, y_channels, |_, r| bias[r]),
-                Start::Shared { base, group, .. } => self.scatter(yt, ld, cs, ys, y_channels, |j, r| {
-                    base[((group[s0 + j] as usize * y_channels) + y_offset + r % f) * npos + r / f]
-                }),
+                Start::Bias(bias) => {
+                    // yt[(p·f + filter)·ld + j], then into NCHW with the bias.
+                    self.products(weight, &chunk, weight_buf, yt, |p| (p * f * ld, ld), false);
+                    let ys = &mut y[(s0 * y_channels + y_offset) * npos..];
+                    self.scatter(yt, ld, cs, ys, y_channels, bias);
+                }
+                Start::Shared { base, group, .. } => {
+                    // y [pos][y_channels][n]: each row starts from its samples' bases and the
+                    // products accumulate onto it in place.
+                    let sample = y_channels * npos;
+                    for p in 0..npos {
+                        for fi in 0..f {
+                            let mut row = &mut y[(p * y_channels + y_offset + fi) * n + s0..][..cs];
+                            let from = (y_offset + fi) * npos + p;
+                            // Samples of one group come in runs (a robot's particles).
+                            for run in group[s0..s0 + cs].chunk_by(|a, b| a == b) {
+                                let (head, tail) = std::mem::take(&mut row).split_at_mut(run.len());
+                                head.fill(base[run[0] as usize * sample + from]);
+                                row = tail;
+                            }
+                        }
+                    }
+                    let block = |p: usize| ((p * y_channels + y_offset) * n + s0, n);
+                    self.products(weight, &chunk, weight_buf, y, block, true);
+                }
             }
         }
     }
 
-    /// yt `[(p·f + filter)·ld + j]` + `start(j, p·f + filter)` → NCHW `ys` (from the chunk's first
-    /// sample and the layer's channel slice), a tile of samples at a time like `load_xt`.
-    fn scatter(
+    /// `Σ_kh W_p[:, kh]·P_kh` of one chunk for every position p, into the `filters × cs` block of
+    /// `out` at `block(p)` = (offset, row stride); `accumulate` adds to what is there.
+    fn products(
         &self,
-        yt: &[f32],
-        ld: usize,
-        cs: usize,
-        ys: &mut [f32],
-        y_channels: usize,
-        start: impl Fn(usize, usize) -> f32,
+        weight: &[f32],
+        chunk: &Chunk<'_>,
+        weight_buf: &mut [f32],
+        out: &mut [f32],
+        block: impl Fn(usize) -> (usize, usize),
+        accumulate: bool,
     ) {
-        let (npos, f) = (self.positions(), self.filters);
+        let Chunk { c_own, xt, ld, cs } = *chunk;
+        let own = Self { c_in: c_own, ..*self };
+        let (f, k, kc) = (self.filters, self.kernel, self.kernel * c_own);
+        for p in 0..self.positions() {
+            let (w_p, stride) = self.own_weights(weight, p, c_own, weight_buf);
+            let (at, row_stride) = block(p);
+            for kh in 0..k {
+                let patch = view(&xt[own.block_start(ld, p, kh)..][..kc * ld], kc, cs, ld);
+                let c = view_mut(&mut out[at..][..(f - 1) * row_stride + cs], f, cs, row_stride);
+                let w = view(&w_p[kh * kc..][..(f - 1) * stride + kc], f, kc, stride);
+                matmul(c, w, patch, accumulate || kh > 0);
+            }
+        }
+    }
+
+    /// yt `[(p·f + filter)·ld + j]` + bias → NCHW `ys` (from the chunk's first sample and the
+    /// layer's channel slice), a tile of samples at a time like `load_xt`.
+    fn scatter(&self, yt: &[f32], ld: usize, cs: usize, ys: &mut [f32], y_channels: usize, bias: &[f32]) {
+        let npos = self.positions();
         for j0 in (0..cs).step_by(TILE) {
-            for r in 0..npos * f {
-                let off = (j0 * y_channels + r % f) * npos + r / f;
+            for (r, &b) in bias.iter().enumerate() {
+                let off = (j0 * y_channels + r % self.filters) * npos + r / self.filters;
                 for (jj, &v) in yt[r * ld + j0..][..TILE.min(cs - j0)].iter().enumerate() {
-                    ys[off + jj * y_channels * npos] = v + start(j0 + jj, r);
+                    ys[off + jj * y_channels * npos] = v + b;
                 }
             }
         }
@@ -540,8 +583,14 @@ mod tests {
         let mut y = vec![SENTINEL; n * yc * l.positions()];
         let start = Start::Shared { base: &base, group, c_own };
         l.forward_chunked(&w, start, &own, n, &mut y, yc, yo, &mut scratch, 2);
-        let want = naive(&l, &to64(&w), &to64(&b), &to64(&full), n, yc, yo);
-        assert_close(&y, &want, 1e-5, "lc forward, own channels");
+        let nchw = naive(&l, &to64(&w), &to64(&b), &to64(&full), n, yc, yo);
+        let npos = l.positions();
+        let mut want = vec![0.0; nchw.len()];
+        for (i, v) in nchw.iter().enumerate() {
+            let (s, c, p) = (i / (yc * npos), i / npos % yc, i % npos);
+            want[(p * yc + c) * n + s] = *v;
+        }
+        assert_close(&y, &want, 1e-5, "lc forward, own channels, samples innermost");
     }
 
     #[test]

@@ -125,66 +125,82 @@ pub fn pfnet_likelihood(
         }
     }
     let model = state.model.clone().expect("loaded above");
-    let pool = state.pool.get_or_insert_with(Workspaces::for_current_pool);
+    let PfNetState { pool, banks, obs, obs_terms, owner, inputs, loglik, .. } = state;
+    let pool = pool.get_or_insert_with(Workspaces::for_current_pool);
+    // The robots the network weighs, and their maps.
+    let weighed = |grid: &LocalGrid, on_map: &OnMap, set: &ParticleSet| {
+        let map = maps.get(on_map.0).ok()?;
+        (grid.values.len() == model.obs_len() && !set.is_empty()).then_some(map)
+    };
 
-    // Gather: every robot's observation, every particle's local map (or map features).
+    // Gather every robot's observation, then encode them while every particle's local map (or
+    // map features) is cut out: one robot's observation is one task, its particles many.
     let per_particle = match params.features {
         MapFeatures::Exact => model.local_map_len(),
         MapFeatures::Cached => model.map_feature_len(),
     };
     let (mut robot_count, mut particles) = (0usize, 0usize);
-    state.obs.clear();
-    state.owner.clear();
+    obs.clear();
+    owner.clear();
     for (grid, on_map, set, ..) in &robots {
-        let Ok(map) = maps.get(on_map.0) else { continue };
-        if grid.values.len() != model.obs_len() || set.is_empty() {
-            continue;
+        if weighed(grid, on_map, set).is_some() {
+            obs.extend_from_slice(&grid.values);
+            owner.extend(std::iter::repeat_n(robot_count as u32, set.len()));
+            robot_count += 1;
+            particles += set.len();
         }
-        state.obs.extend_from_slice(&grid.values);
-        state.owner.extend(std::iter::repeat_n(robot_count as u32, set.len()));
-        state.inputs.resize((particles + set.len()) * per_particle, 0.0);
-        let out = &mut state.inputs[particles * per_particle..];
-        match params.features {
-            MapFeatures::Exact => {
-                crop_local_maps(&map_view(map), &set.x, &set.y, &set.yaw, &LocalMapSpec::default(), out)
-            }
-            MapFeatures::Cached => {
-                let bank = state.banks.entry(on_map.0).or_insert_with(|| {
-                    let spec =
-                        FeatureCacheSpec { orientations: params.orientations, ..FeatureCacheSpec::default() };
-                    Arc::new(FeatureBank::build(&model, &map_view(map), &spec))
-                });
-                bank.crop_features(&set.x, &set.y, &set.yaw, out);
-            }
-        }
-        robot_count += 1;
-        particles += set.len();
     }
     if particles == 0 {
         return;
     }
+    obs_terms.resize(robot_count * model.obs_term_len(), 0.0);
+    inputs.resize(particles * per_particle, 0.0);
+    rayon::join(
+        || model.observation_terms_par(obs, obs_terms, pool),
+        || {
+            let mut first = 0;
+            for (grid, on_map, set, ..) in &robots {
+                let Some(map) = weighed(grid, on_map, set) else { continue };
+                let out = &mut inputs[first * per_particle..(first + set.len()) * per_particle];
+                first += set.len();
+                match params.features {
+                    MapFeatures::Exact => crop_local_maps(
+                        &map_view(map),
+                        &set.x,
+                        &set.y,
+                        &set.yaw,
+                        &LocalMapSpec::default(),
+                        out,
+                    ),
+                    MapFeatures::Cached => {
+                        let bank = banks.entry(on_map.0).or_insert_with(|| {
+                            let spec = FeatureCacheSpec {
+                                orientations: params.orientations,
+                                ..FeatureCacheSpec::default()
+                            };
+                            Arc::new(FeatureBank::build(&model, &map_view(map), &spec))
+                        });
+                        bank.crop_features(&set.x, &set.y, &set.yaw, out);
+                    }
+                }
+            }
+        },
+    );
 
     // One batched forward pass for the whole world.
-    state.obs_terms.resize(robot_count * model.obs_term_len(), 0.0);
-    model.observation_terms_par(&state.obs, &mut state.obs_terms, pool);
-    state.loglik.resize(particles, 0.0);
-    let (inputs, owner) = (&state.inputs[..particles * per_particle], &state.owner);
+    loglik.resize(particles, 0.0);
     match params.features {
-        MapFeatures::Exact => {
-            model.log_likelihoods_exact(&state.obs_terms, owner, inputs, &mut state.loglik, pool)
-        }
-        MapFeatures::Cached => {
-            model.log_likelihoods_from_features(&state.obs_terms, owner, inputs, &mut state.loglik, pool)
-        }
+        MapFeatures::Exact => model.log_likelihoods_exact(obs_terms, owner, inputs, loglik, pool),
+        MapFeatures::Cached => model.log_likelihoods_from_features(obs_terms, owner, inputs, loglik, pool),
     }
 
     // Scatter, in the same order as the gather.
     let mut first = 0;
     for (grid, on_map, mut set, mut health, mut stats) in &mut robots {
-        if maps.get(on_map.0).is_err() || grid.values.len() != model.obs_len() || set.is_empty() {
+        if weighed(grid, on_map, &set).is_none() {
             continue;
         }
-        let loglik = &state.loglik[first..first + set.len()];
+        let loglik = &loglik[first..first + set.len()];
         first += set.len();
         let outcome = set.weigh_with(|set| {
             for (w, l) in set.log_w.iter_mut().zip(loglik) {

@@ -141,9 +141,10 @@ impl Joint {
         }
     }
 
-    /// `forward` for particles sharing observations: map features [n][map_channels][side][side],
-    /// particle i's observation terms at row `owner[i]` of `terms` → acts.loglik [n]. The
-    /// locally-connected products then cover the map channels only (a third of the paper's).
+    /// `forward` for particles sharing observations, without what a backward pass would need:
+    /// map features [n][map_channels][side][side], particle i's observation terms at row
+    /// `owner[i]` of `terms` → acts.loglik [n]. The locally-connected products then cover the map
+    /// channels only (a third of the paper's), and the head runs across particles.
     pub fn forward_shared(
         &self,
         p: &Params,
@@ -167,12 +168,43 @@ impl Joint {
                 &mut acts.scratch,
             );
         }
-        self.head_forward(p, n, acts);
+        self.head_forward_across_samples(p, n, acts);
     }
 
     /// Both locally-connected layers with the channel slice of `local` each writes.
     fn layers(&self) -> [(usize, &(LocallyConnected2d, ParamId, ParamId)); 2] {
         [(0, &self.lc3), (self.lc3.0.filters, &self.lc5)]
+    }
+
+    /// `head_forward` for acts.local laid out [o·o][channels][n] (samples innermost, as
+    /// `forward_own_channels` leaves it): the pool's max, the ReLU and the dense head are each a
+    /// pass along a row of n samples, and no argmax is kept.
+    fn head_forward_across_samples(&self, p: &Params, n: usize, acts: &mut JointActivations) {
+        let (o, q, (k, stride)) = (self.out_side, self.pooled_side, (POOL.kernel, POOL.stride));
+        let channels = 2 * self.lc3.0.filters;
+        let (_, w, b) = &self.head;
+        let weight = p.get(*w);
+        sized(&mut acts.loglik, n);
+        acts.loglik.fill(p.get(*b)[0]);
+        sized(&mut acts.pooled, n);
+        let pooled = &mut acts.pooled[..n];
+        for c in 0..channels {
+            for (qy, qx) in (0..q).flat_map(|qy| (0..q).map(move |qx| (qy, qx))) {
+                // Starting from 0 makes the max the ReLU's too (ReLU and max commute).
+                pooled.fill(0.0);
+                for (dy, dx) in (0..k).flat_map(|dy| (0..k).map(move |dx| (dy, dx))) {
+                    let position = (stride * qy + dy) * o + stride * qx + dx;
+                    for (m, &v) in pooled.iter_mut().zip(&acts.local[(position * channels + c) * n..][..n]) {
+                        *m = if v > *m { v } else { *m };
+                    }
+                }
+                // The dense input is the pooled map flattened as [channel][row][col].
+                let wi = weight[(c * q + qy) * q + qx];
+                for (l, &m) in acts.loglik.iter_mut().zip(pooled.iter()) {
+                    *l += wi * m;
+                }
+            }
+        }
     }
 
     /// After the locally-connected layers (acts.local): ReLU, pool, dense → acts.loglik.
