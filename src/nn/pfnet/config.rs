@@ -4,6 +4,10 @@
 use super::spatial_transformer::LocalMapSpec;
 use serde::{Deserialize, Serialize};
 
+/// Largest side of a particle's local map, cells (paper: 28): the feature cache crops at most
+/// (64 / 2)² feature cells per particle.
+pub const MAX_LOCAL_MAP_CELLS: usize = 64;
+
 /// One of a stage's parallel convolutions ('same' padding, stride 1), concatenated along channels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ConvBranch {
@@ -145,10 +149,13 @@ impl PfNetConfig {
         if self.map_channels == 0 || self.obs_channels == 0 {
             return Err("map_channels, obs_channels: expected at least 1".into());
         }
-        if self.local_map.cells * 2 != self.obs_cells || !self.local_map.cells.is_multiple_of(4) {
+        if self.local_map.cells * 2 != self.obs_cells
+            || !self.local_map.cells.is_multiple_of(4)
+            || self.local_map.cells > MAX_LOCAL_MAP_CELLS
+        {
             return Err(format!(
-                "local_map.cells, obs_cells: expected a multiple of 4 and twice it (the encoders meet at \
-                 a quarter of the observation), found {} and {}",
+                "local_map.cells, obs_cells: expected a multiple of 4 up to {MAX_LOCAL_MAP_CELLS} and twice \
+                 it (the encoders meet at a quarter of the observation), found {} and {}",
                 self.local_map.cells, self.obs_cells
             ));
         }
@@ -156,5 +163,23 @@ impl PfNetConfig {
             return Err("joint_filters, layer_norm_eps: expected ≥ 1 and > 0".into());
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn local_map_sides_are_checked_by_name() {
+        assert!(PfNetConfig::paper().check().is_ok() && PfNetConfig::compact().check().is_ok());
+        for (cells, obs_cells) in [(30, 60), (28, 50), (MAX_LOCAL_MAP_CELLS + 4, 2 * MAX_LOCAL_MAP_CELLS + 8)]
+        {
+            let mut config = PfNetConfig::compact();
+            (config.local_map.cells, config.obs_cells) = (cells, obs_cells);
+            let err = config.check().unwrap_err();
+            assert!(err.starts_with("local_map.cells, obs_cells: expected"), "unhelpful error: {err}");
+            assert!(err.contains(&format!("found {cells} and {obs_cells}")), "{err}");
+        }
     }
 }

@@ -44,6 +44,8 @@ use std::f64::consts::TAU;
 /// Feature cells per tile side (plus the halo): the paper's second-stage im2col of one tile then
 /// takes 1,600 taps × 80² pixels ≈ 41 MB per thread.
 const TILE: usize = 64;
+/// Feature cells of one particle's crop at most (the paper's 14 × 14 is 196).
+const MAX_CELLS: usize = (super::config::MAX_LOCAL_MAP_CELLS / 2).pow(2);
 /// Poses per parallel task of `crop_features`.
 const CROP_CHUNK: usize = 64;
 
@@ -184,21 +186,25 @@ impl FeatureBank {
 
         let (half, c) = (self.side / 2, self.channels);
         let (max_u, max_v) = ((bank.rows - 1) as f32, (bank.cols - 1) as f32);
-        for i in 0..half {
-            for j in 0..half {
-                // `max` first: NaN becomes 0, a corner of the window.
-                let u = (first[0] + i as f32 * di[0] + j as f32 * dj[0]).max(0.0).min(max_u);
-                let v = (first[1] + i as f32 * di[1] + j as f32 * dj[1]).max(0.0).min(max_v);
-                let (i0, j0) = ((u as usize).min(bank.rows - 2), (v as usize).min(bank.cols - 2));
-                let (fu, fv) = (u - i0 as f32, v - j0 as f32);
-                let top = (i0 * bank.cols + j0) * c;
-                let bottom = top + bank.cols * c;
-                let (t, b) = (&bank.features[top..top + 2 * c], &bank.features[bottom..bottom + 2 * c]);
-                for ch in 0..c {
-                    let upper = t[ch] + fv * (t[c + ch] - t[ch]);
-                    let lower = b[ch] + fv * (b[c + ch] - b[ch]);
-                    out[(ch * half + i) * half + j] = upper + fu * (lower - upper);
-                }
+        // Each feature cell's top-left bank tap and its bilinear fractions, then the channels one
+        // at a time, so that the output is written in order.
+        let mut taps = [(0usize, 0.0f32, 0.0f32); MAX_CELLS];
+        for (cell, tap) in taps.iter_mut().take(half * half).enumerate() {
+            let (i, j) = ((cell / half) as f32, (cell % half) as f32);
+            // `max` first: NaN becomes 0, a corner of the window.
+            let u = (first[0] + i * di[0] + j * dj[0]).max(0.0).min(max_u);
+            let v = (first[1] + i * di[1] + j * dj[1]).max(0.0).min(max_v);
+            let (i0, j0) = ((u as usize).min(bank.rows - 2), (v as usize).min(bank.cols - 2));
+            *tap = ((i0 * bank.cols + j0) * c, u - i0 as f32, v - j0 as f32);
+        }
+        let below = bank.cols * c;
+        for (ch, plane) in out.chunks_exact_mut(half * half).enumerate() {
+            let features = &bank.features[ch..];
+            for (value, &(top, fu, fv)) in plane.iter_mut().zip(&taps) {
+                let (t, b) = (&features[top..][..c + 1], &features[top + below..][..c + 1]);
+                let upper = t[0] + fv * (t[c] - t[0]);
+                let lower = b[0] + fv * (b[c] - b[0]);
+                *value = upper + fu * (lower - upper);
             }
         }
     }
