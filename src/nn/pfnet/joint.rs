@@ -2,6 +2,11 @@
 //!
 //! 14×14×(8 + 16) → locally-connected 8@3×3 'valid' ⊕ 8@5×5 (zero pad 1), each with ReLU
 //! → 12×12×16 → max-pool 3×3/2 'valid' → 5×5×16 = 400 → dense → 1.
+//!
+//! Two forward passes: `forward` on the concatenated features, keeping what `backward` needs
+//! (training), and `forward_shared` for the filter, where the particles of one robot share its
+//! observation: that enters once per robot through `observation_terms`, and the particles'
+//! products cover only the map channels.
 
 use super::config::PfNetConfig;
 use super::stage::{sized, zeroed};
@@ -190,7 +195,8 @@ impl Joint {
         let pooled = &mut acts.pooled[..n];
         for c in 0..channels {
             for (qy, qx) in (0..q).flat_map(|qy| (0..q).map(move |qx| (qy, qx))) {
-                // Starting from 0 makes the max the ReLU's too (ReLU and max commute).
+                // Starting from 0 makes the max the ReLU's too (ReLU and max commute); the
+                // pool is 'valid', so every window lies inside.
                 pooled.fill(0.0);
                 for (dy, dx) in (0..k).flat_map(|dy| (0..k).map(move |dx| (dy, dx))) {
                     let position = (stride * qy + dy) * o + stride * qx + dx;
