@@ -3,7 +3,9 @@
 //! never interrupted, and training lowers the validation loss of a fixed batch.
 
 use apfn::nn::checkpoint::Checkpoint;
-use apfn::nn::pfnet::{FeatureCacheSpec, GradBuffers, PfNet, PfNetConfig, Workspaces, is_map_encoder_param};
+use apfn::nn::pfnet::{
+    FeatureCacheSpec, GradBuffers, Observation, PfNet, PfNetConfig, Workspaces, is_map_encoder_param,
+};
 use apfn::particles::MapFeatures;
 use apfn::train::pfnet::{BatchBuffers, TrainPfNetConfig, TrainState, feature_banks, simulate_data};
 
@@ -35,7 +37,32 @@ fn train_pfnet_data_are_deterministic_and_shaped() {
     for e in &a.episodes {
         assert_eq!(e.poses.len(), 4, "every episode has `steps` steps");
         assert_eq!(e.grids.len(), 4 * 56 * 56, "one 56 × 56 grid per step");
+        assert_eq!(e.depths.len(), 4 * 56, "one 56-column depth strip per step");
     }
+}
+
+#[test]
+fn train_pfnet_observes_the_depth_strip_and_refuses_data_without_it() {
+    let config = TrainPfNetConfig { observation: Observation::GridAndDepth, ..tiny() };
+    let [train, _] = simulate_data(&config, |_, _| {}).unwrap();
+    let mut state = TrainState::new(&config).unwrap();
+    assert_eq!(state.model.config.obs_channels, 2, "grid and depth image");
+    let (pool, mut buffers, mut grads) =
+        (Workspaces::for_current_pool(), BatchBuffers::default(), GradBuffers::default());
+    let before = state.model.params.values.clone();
+    state.train_step(&config, (&train, &[]), &mut buffers, &mut grads, &pool);
+    assert!(state.model.params.values.iter().all(|v| v.is_finite()), "a finite step");
+    assert_ne!(state.model.params.values, before, "the step trains");
+
+    let dir = tempfile::tempdir().unwrap();
+    let schedule = dir.path().join("no_depth.ron");
+    let text = std::fs::read_to_string("systems/collect_pfnet.ron")
+        .unwrap()
+        .replace("(\"depth\",", "// (\"depth\",");
+    std::fs::write(&schedule, text).unwrap();
+    let blind = TrainPfNetConfig { collect_schedule: schedule.display().to_string(), ..config };
+    let err = simulate_data(&blind, |_, _| {}).unwrap_err().to_string();
+    assert!(err.starts_with("observation: `grid_and_depth` reads depth strips"), "unhelpful error: {err}");
 }
 
 #[test]
@@ -171,6 +198,12 @@ fn collect_is_deterministic_resumable_and_loads_back() {
     assert_eq!(set.episodes.len(), 6, "two shards of three episodes");
     assert_eq!(set.maps.len(), 2);
     assert!(set.episodes.iter().all(|e| e.poses.len() == 4 && e.grids.len() == 4 * 56 * 56));
+    assert_eq!(set.depth_columns, 56, "the depth strips come back");
+    assert!(
+        set.episodes
+            .iter()
+            .all(|e| e.depths.len() == 4 * 56 && e.depths.iter().all(|d| (0.1..=10.0).contains(d)))
+    );
 }
 
 #[test]

@@ -4,12 +4,13 @@
 
 use crate::nn::pfnet::{
     FeatureBank, FeatureCacheSpec, LocalMapSpec, MapView, PfNet, PfNetConfig, Workspaces, crop_local_maps,
+    depth_image,
 };
 use crate::params::{StepParams, expect_param};
 use crate::particles::set::{
     FilterHealth, LikelihoodStats, ObservationModel, ParticleSet, record_observation,
 };
-use crate::sense::LocalGrid;
+use crate::sense::{DepthStrip, LocalGrid};
 use crate::world::OnMap;
 use crate::world::map::NetworkMap;
 use bevy::prelude::*;
@@ -107,14 +108,36 @@ pub struct PfNetState {
     owner: Vec<u32>,
     inputs: Vec<f32>,
     loglik: Vec<f32>,
+    /// Whether a robot without what the network observes was reported (once per system).
+    reported_missing: bool,
 }
 
-/// Reads LocalGrid, OnMap → the map's NetworkMap, PfNetLikelihoodParams. Writes ParticleSet
+/// What of the sensing the network observes a robot lacks, if anything.
+fn missing_input(model: &PfNet, grid: &LocalGrid, strip: Option<&DepthStrip>) -> Option<&'static str> {
+    let observation = model.config.observation;
+    if observation.uses_grid() && grid.values.len() != model.config.obs_cells.pow(2) {
+        return Some("a LiDAR grid of the network's size (the `local_grid` step)");
+    }
+    if observation.uses_depth() && strip.is_none_or(|strip| strip.depths_m.is_empty()) {
+        return Some("a depth strip (the `depth` step)");
+    }
+    None
+}
+
+/// Reads LocalGrid and/or DepthStrip (what the network observes), OnMap → the map's NetworkMap,
+/// PfNetLikelihoodParams. Writes ParticleSet
 /// weights, LikelihoodStats, FilterHealth.degeneracies.
 pub fn pfnet_likelihood(
     params: Res<PfNetLikelihoodParams>,
     maps: Query<&NetworkMap>,
-    mut robots: Query<(&LocalGrid, &OnMap, &mut ParticleSet, &mut FilterHealth, &mut LikelihoodStats)>,
+    mut robots: Query<(
+        &LocalGrid,
+        Option<&DepthStrip>,
+        &OnMap,
+        &mut ParticleSet,
+        &mut FilterHealth,
+        &mut LikelihoodStats,
+    )>,
     mut state: Local<PfNetState>,
 ) {
     let state = &mut *state;
@@ -125,12 +148,12 @@ pub fn pfnet_likelihood(
         }
     }
     let model = state.model.clone().expect("loaded above");
-    let PfNetState { pool, banks, obs, obs_terms, owner, inputs, loglik, .. } = state;
+    let PfNetState { pool, banks, obs, obs_terms, owner, inputs, loglik, reported_missing, .. } = state;
     let pool = pool.get_or_insert_with(Workspaces::for_current_pool);
     // The robots the network weighs, and their maps.
-    let weighed = |grid: &LocalGrid, on_map: &OnMap, set: &ParticleSet| {
+    let weighed = |grid: &LocalGrid, strip: Option<&DepthStrip>, on_map: &OnMap, set: &ParticleSet| {
         let map = maps.get(on_map.0).ok()?;
-        (grid.values.len() == model.obs_len() && !set.is_empty()).then_some(map)
+        (missing_input(&model, grid, strip).is_none() && !set.is_empty()).then_some(map)
     };
 
     // Gather every robot's observation, then encode them while every particle's local map (or
@@ -142,9 +165,25 @@ pub fn pfnet_likelihood(
     let (mut robot_count, mut particles) = (0usize, 0usize);
     obs.clear();
     owner.clear();
-    for (grid, on_map, set, ..) in &robots {
-        if weighed(grid, on_map, set).is_some() {
-            obs.extend_from_slice(&grid.values);
+    for (grid, strip, on_map, set, ..) in &robots {
+        if let Some(missing) = missing_input(&model, grid, strip).filter(|_| !*reported_missing) {
+            *reported_missing = true;
+            tracing::warn!(
+                "pfnet_likelihood: a robot has no {missing}, which the network observes (`{}`); \
+                 its particles are left unweighed",
+                model.config.observation.name()
+            );
+        }
+        if weighed(grid, strip, on_map, set).is_some() {
+            let at = obs.len();
+            obs.resize(at + model.obs_len(), 0.0);
+            let (grid_channel, depth_channel) = model.config.observation.split(&mut obs[at..]);
+            if let Some(channel) = grid_channel {
+                channel.copy_from_slice(&grid.values);
+            }
+            if let (Some(channel), Some(strip)) = (depth_channel, strip) {
+                depth_image(&strip.depths_m, model.config.obs_cells, channel);
+            }
             owner.extend(std::iter::repeat_n(robot_count as u32, set.len()));
             robot_count += 1;
             particles += set.len();
@@ -159,8 +198,8 @@ pub fn pfnet_likelihood(
         || model.observation_terms_par(obs, obs_terms, pool),
         || {
             let mut first = 0;
-            for (grid, on_map, set, ..) in &robots {
-                let Some(map) = weighed(grid, on_map, set) else { continue };
+            for (grid, strip, on_map, set, ..) in &robots {
+                let Some(map) = weighed(grid, strip, on_map, set) else { continue };
                 let out = &mut inputs[first * per_particle..(first + set.len()) * per_particle];
                 first += set.len();
                 match params.features {
@@ -196,8 +235,8 @@ pub fn pfnet_likelihood(
 
     // Scatter, in the same order as the gather.
     let mut first = 0;
-    for (grid, on_map, mut set, mut health, mut stats) in &mut robots {
-        if weighed(grid, on_map, &set).is_none() {
+    for (grid, strip, on_map, mut set, mut health, mut stats) in &mut robots {
+        if weighed(grid, strip, on_map, &set).is_none() {
             continue;
         }
         let loglik = &loglik[first..first + set.len()];
@@ -228,7 +267,7 @@ pub fn map_view(map: &NetworkMap) -> MapView<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::pfnet::{MapInput, Workspace};
+    use crate::nn::pfnet::{MapInput, Observation, Workspace};
     use crate::testing::tiny_room;
     use crate::world::Pose2;
     use bevy::ecs::system::RunSystemOnce;
@@ -253,10 +292,8 @@ mod tests {
         (world, robots)
     }
 
-    /// The network's weights for `POSES` and `grid`, computed layer by layer without the system.
-    fn expected_weights(grid: &LocalGrid) -> Vec<f32> {
-        let model =
-            shared_model(&PfNetLikelihoodParams { config: "compact".into(), ..Default::default() }).unwrap();
+    /// `model`'s weights for `POSES` and the observation image `obs`, without the system.
+    fn expected_weights(model: &PfNet, obs: &[f32]) -> Vec<f32> {
         let map = NetworkMap::from_fine(&tiny_room(), 0.1);
         let mut ws = Workspace::default();
         let (xs, ys, yaws): (Vec<f32>, Vec<f32>, Vec<f32>) = (
@@ -267,7 +304,7 @@ mod tests {
         let mut maps = vec![0.0; 3 * model.local_map_len()];
         crop_local_maps(&map_view(&map), &xs, &ys, &yaws, &LocalMapSpec::default(), &mut maps);
         // The training path: the joint stage on concatenated features, not the system's split one.
-        let loglik = model.step_forward(&grid.values, (&maps, MapInput::LocalMaps), 3, &mut ws);
+        let loglik = model.step_forward(obs, (&maps, MapInput::LocalMaps), 3, &mut ws);
         let total: f32 = loglik.iter().map(|l| l.exp()).sum();
         loglik.iter().map(|l| l.exp() / total).collect()
     }
@@ -277,9 +314,11 @@ mod tests {
         let grids = [grid(0), grid(1)];
         let (mut world, robots) = world_with_robots(&grids, MapFeatures::Exact);
         world.run_system_once(pfnet_likelihood).expect("system runs");
+        let model =
+            shared_model(&PfNetLikelihoodParams { config: "compact".into(), ..Default::default() }).unwrap();
         for (robot, grid) in robots.iter().zip(&grids) {
             let weights = world.get::<ParticleSet>(*robot).unwrap().weights();
-            let want = expected_weights(grid);
+            let want = expected_weights(&model, &grid.values);
             for (w, e) in weights.iter().zip(&want) {
                 assert!(
                     (w - e).abs() < 1e-5,
@@ -292,6 +331,36 @@ mod tests {
         let (a, b) =
             (world.get::<ParticleSet>(robots[0]).unwrap(), world.get::<ParticleSet>(robots[1]).unwrap());
         assert_ne!(a.log_w, b.log_w, "different observations must give different weights");
+    }
+
+    #[test]
+    fn pfnet_likelihood_reads_the_depth_strip_when_the_network_observes_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("grid_and_depth.safetensors");
+        let model = PfNet::new(PfNetConfig::compact().observing(Observation::GridAndDepth), 4).unwrap();
+        model.save(&path).unwrap();
+        let mut world = World::new();
+        let checkpoint = Some(path.display().to_string());
+        world.insert_resource(PfNetLikelihoodParams { checkpoint, ..Default::default() });
+        let map = world.spawn(NetworkMap::from_fine(&tiny_room(), 0.1)).id();
+        let strip = DepthStrip { depths_m: (0..56).map(|c| 0.3 + 0.05 * c as f32).collect() };
+        let robot = (grid(0), OnMap(map), ParticleSet::from_poses(&POSES));
+        let seeing = world.spawn((robot.clone(), strip.clone())).id();
+        let blind = world.spawn(robot).id();
+        world.run_system_once(pfnet_likelihood).expect("system runs");
+
+        let mut obs = grid(0).values;
+        obs.resize(2 * 56 * 56, f32::NAN);
+        depth_image(&strip.depths_m, 56, &mut obs[56 * 56..]);
+        let (weights, want) =
+            (world.get::<ParticleSet>(seeing).unwrap().weights(), expected_weights(&model, &obs));
+        assert!(weights.iter().zip(&want).all(|(w, e)| (w - e).abs() < 1e-5), "{weights:?} vs {want:?}");
+        let (weights, stats) = (
+            world.get::<ParticleSet>(blind).unwrap().weights(),
+            world.get::<LikelihoodStats>(blind).unwrap(),
+        );
+        assert!(weights.iter().all(|&w| (w - 1.0 / 3.0).abs() < 1e-6), "no strip, no update: {weights:?}");
+        assert_eq!(stats.updates, 0, "nothing booked for a robot the network cannot see through");
     }
 
     #[test]

@@ -1,7 +1,8 @@
 //! `apfn collect`: PF-net's training episodes written to disk, for training without simulating
 //! or for other tools. Shards of episodes (safetensors, readable from Python: `grids` u8
 //! [E, T, cells, cells], `poses` and `odometry` f32 [E, T, 3] as (x, y, θ), `map` f32 [E] — an
-//! index into the shard's `maps` metadata, comma-separated apartment names) and `manifest.json`.
+//! index into the shard's `maps` metadata, comma-separated apartment names, and `depths` f32
+//! [E, T, columns] in metres when the schedule runs the `depth` step) and `manifest.json`.
 //! Each shard simulates its own apartments from its own seed, so shards are independent:
 //! a collection stopped midway resumes at the first missing shard.
 
@@ -114,12 +115,17 @@ fn encode_shard(set: &EpisodeSet) -> anyhow::Result<Vec<u8>> {
     };
     let (poses, odometry) = (pose_bytes(|ep| &ep.poses), pose_bytes(|ep| &ep.odometry));
     let maps: Vec<u8> = set.episodes.iter().flat_map(|ep| (ep.map as f32).to_le_bytes()).collect();
-    let tensors = [
+    let depths: Vec<u8> =
+        set.episodes.iter().flat_map(|ep| ep.depths.iter().flat_map(|d| d.to_le_bytes())).collect();
+    let mut tensors = vec![
         ("grids", TensorView::new(Dtype::U8, vec![e, t, c, c], &grids)?),
         ("poses", TensorView::new(Dtype::F32, vec![e, t, 3], &poses)?),
         ("odometry", TensorView::new(Dtype::F32, vec![e, t, 3], &odometry)?),
         ("map", TensorView::new(Dtype::F32, vec![e], &maps)?),
     ];
+    if set.depth_columns > 0 {
+        tensors.push(("depths", TensorView::new(Dtype::F32, vec![e, t, set.depth_columns], &depths)?));
+    }
     let metadata = HashMap::from([("maps".to_string(), set.map_names.join(","))]);
     Ok(safetensors::serialize(tensors, Some(metadata))?)
 }
@@ -157,6 +163,9 @@ pub fn load_collection(dir: &Path) -> anyhow::Result<EpisodeSet> {
         let grids = shard.tensor("grids").with_context(|| format!("{}: tensor `grids`", path.display()))?;
         let (e, t, c) = (grids.shape()[0], grids.shape()[1], grids.shape()[2]);
         let (poses, odometry, maps) = (floats("poses")?, floats("odometry")?, floats("map")?);
+        // Shards of a schedule without the `depth` step hold no strips.
+        let columns = shard.tensor("depths").map_or(0, |view| view.shape()[2]);
+        let depths = if columns > 0 { floats("depths")? } else { vec![] };
         let pose = |v: &[f32], i: usize| Pose2::new(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
         for (k, &map) in maps.iter().enumerate().take(e) {
             all.episodes.push(RecordedEpisode {
@@ -164,9 +173,11 @@ pub fn load_collection(dir: &Path) -> anyhow::Result<EpisodeSet> {
                 poses: (0..t).map(|s| pose(&poses, k * t + s)).collect(),
                 odometry: (0..t).map(|s| pose(&odometry, k * t + s)).collect(),
                 grids: grids.data()[k * t * c * c..(k + 1) * t * c * c].to_vec(),
+                depths: depths.get(k * t * columns..(k + 1) * t * columns).unwrap_or_default().to_vec(),
             });
         }
         all.grid_cells = c;
+        all.depth_columns = columns;
     }
     Ok(all)
 }

@@ -1,6 +1,7 @@
 //! Training data for PF-net: short episodes of a policy driving on procedural apartments,
 //! simulated with the same systems as every other run (a schedule file), recorded per step as
-//! the true pose, the odometry and the 56 × 56 LiDAR grid (stored as u8).
+//! the true pose, the odometry, the 56 × 56 LiDAR grid (stored as u8) and, when the schedule runs
+//! the `depth` step, the depth strip.
 //!
 //! Timing as in `apfn record`: after agent step k, `PreviousPose` is the pose the step's scan
 //! (and so its grid) was taken from, and `Odometry.delta` is the motion since the previous scan.
@@ -8,7 +9,7 @@
 use crate::compose::{LoadedScene, MapName, Pipeline};
 use crate::episode::Episode;
 use crate::plugin::headless_app;
-use crate::sense::{LocalGrid, Odometry};
+use crate::sense::{DepthStrip, LocalGrid, Odometry};
 use crate::world::map::NetworkMap;
 use crate::world::{OnMap, Pose2, PreviousPose};
 use anyhow::{Context, bail};
@@ -25,6 +26,8 @@ pub struct RecordedEpisode {
     pub odometry: Vec<Pose2>,
     /// The grids, `steps × cells²` values of 0…255 (value / 255 is the network's input).
     pub grids: Vec<u8>,
+    /// The depth strips, `steps × columns` metres (empty without the `depth` step).
+    pub depths: Vec<f32>,
 }
 
 /// Episodes and the network maps they were driven on.
@@ -36,6 +39,8 @@ pub struct EpisodeSet {
     pub episodes: Vec<RecordedEpisode>,
     /// Side of a grid, cells.
     pub grid_cells: usize,
+    /// Columns of a depth strip (0: none recorded).
+    pub depth_columns: usize,
 }
 
 impl EpisodeSet {
@@ -74,7 +79,8 @@ pub fn simulate_episodes(
         map_names.push(name.0.clone());
     }
     let mut current: Vec<Option<RecordedEpisode>> = vec![None; robots.len()];
-    let mut done = EpisodeSet { maps, map_names, episodes: Vec::with_capacity(count), grid_cells: 0 };
+    let mut done =
+        EpisodeSet { maps, map_names, episodes: Vec::with_capacity(count), grid_cells: 0, depth_columns: 0 };
     while done.episodes.len() < count {
         app.update();
         let world = app.world();
@@ -83,7 +89,13 @@ pub fn simulate_episodes(
             let grid = world.get::<LocalGrid>(robot).context("a robot without LocalGrid")?;
             let map = map_index[&world.get::<OnMap>(robot).context("a robot without OnMap")?.0];
             if step == 1 {
-                *slot = Some(RecordedEpisode { map, poses: vec![], odometry: vec![], grids: vec![] });
+                *slot = Some(RecordedEpisode {
+                    map,
+                    poses: vec![],
+                    odometry: vec![],
+                    grids: vec![],
+                    depths: vec![],
+                });
             }
             let Some(episode) = slot.as_mut() else { continue }; // joined mid-episode
             episode.poses.push(world.get::<PreviousPose>(robot).context("no PreviousPose")?.0);
@@ -91,6 +103,10 @@ pub fn simulate_episodes(
             episode.odometry.push(if step == 1 { Pose2::default() } else { delta });
             episode.grids.extend(grid.values.iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8));
             done.grid_cells = grid.cells;
+            // Robots carry an empty strip unless the schedule runs `depth`.
+            let depths = world.get::<DepthStrip>(robot).map_or(&[][..], |strip| &strip.depths_m);
+            episode.depths.extend_from_slice(depths);
+            done.depth_columns = depths.len();
             if step == steps && done.episodes.len() < count {
                 done.episodes.push(slot.take().expect("recording"));
             }

@@ -12,8 +12,8 @@ use crate::compose::{LoadedScene, Pipeline, Scene, standard_registry};
 use crate::nn::adam::{Adam, AdamConfig};
 use crate::nn::checkpoint::Checkpoint;
 use crate::nn::pfnet::{
-    FeatureBank, FeatureCacheSpec, GradBuffers, LocalMapSpec, MapInput, PfNet, PfNetConfig, PoseLoss,
-    StepBatch, Workspaces, crop_local_maps,
+    FeatureBank, FeatureCacheSpec, GradBuffers, LocalMapSpec, MapInput, Observation, PfNet, PfNetConfig,
+    PoseLoss, StepBatch, Workspaces, crop_local_maps, depth_image,
 };
 use crate::particles::{MapFeatures, map_view};
 use crate::train::collect::load_collection;
@@ -35,6 +35,9 @@ use std::path::Path;
 pub struct TrainPfNetConfig {
     /// The network: `paper` or `compact`.
     pub network: String,
+    /// What it observes (the paper: `grid`, the LiDAR grid); `depth` and `grid_and_depth` read
+    /// the depth strips the collect schedule records when it runs the `depth` step.
+    pub observation: Observation,
     /// Seen apartments to drive on (training) and unseen ones (validation).
     pub train_maps: usize,
     pub val_maps: usize,
@@ -86,6 +89,7 @@ impl Default for TrainPfNetConfig {
     fn default() -> Self {
         Self {
             network: "compact".into(),
+            observation: Observation::Grid,
             train_maps: 40,
             val_maps: 10,
             apartment: ApartmentParams::paper_size(),
@@ -215,7 +219,16 @@ pub fn simulate_data(
         train.steps(),
         config.steps
     );
-    Ok([train, simulate(Split::Unseen, config.val_maps, config.val_episodes, 1)?])
+    let validation = simulate(Split::Unseen, config.val_maps, config.val_episodes, 1)?;
+    for (set, source) in [(&train, "data (or collect_schedule)"), (&validation, "collect_schedule")] {
+        anyhow::ensure!(
+            !config.observation.uses_depth() || set.depth_columns > 0,
+            "observation: `{}` reads depth strips, but the episodes of {source} have none: \
+             expected a schedule with the `depth` step",
+            config.observation.name()
+        );
+    }
+    Ok([train, validation])
 }
 
 /// The feature banks of every map of `data` with `features: cached` (none with `exact`), built
@@ -282,8 +295,19 @@ impl BatchBuffers {
                 let s = b * t + step;
                 let truth = episode.poses[step];
                 let obs = &mut self.obs[s * model.obs_len()..(s + 1) * model.obs_len()];
-                let grids = &episode.grids[step * grid..(step + 1) * grid];
-                obs.iter_mut().zip(grids).for_each(|(o, &g)| *o = f32::from(g) / 255.0);
+                let (grid_channel, depth_channel) = model.config.observation.split(obs);
+                if let Some(channel) = grid_channel {
+                    let grids = &episode.grids[step * grid..(step + 1) * grid];
+                    channel.iter_mut().zip(grids).for_each(|(o, &g)| *o = f32::from(g) / 255.0);
+                }
+                if let Some(channel) = depth_channel {
+                    let columns = data.depth_columns;
+                    depth_image(
+                        &episode.depths[step * columns..(step + 1) * columns],
+                        model.config.obs_cells,
+                        channel,
+                    );
+                }
                 let (xs, ys, yaws): (Vec<f32>, Vec<f32>, Vec<f32>) = (
                     particles.iter().map(|p| p.x).collect(),
                     particles.iter().map(|p| p.y).collect(),
@@ -364,15 +388,16 @@ const ADAM_V: &str = "adam.v/";
 impl TrainState {
     /// Fresh weights from the seed, or `config.init`'s (which must be of `config.network`).
     pub fn new(config: &TrainPfNetConfig) -> anyhow::Result<Self> {
-        let network = PfNetConfig::named(&config.network).expect("checked");
+        let network = PfNetConfig::named(&config.network).expect("checked").observing(config.observation);
         let model = match &config.init {
             None => PfNet::new(network, config.seed).map_err(anyhow::Error::msg)?,
             Some(path) => {
                 let model = PfNet::load(Path::new(path)).with_context(|| format!("init: {path}"))?;
                 anyhow::ensure!(
                     model.config == network,
-                    "init: {path} holds another network than `network: {}`",
-                    config.network
+                    "init: {path} holds another network than `network: {}` observing `{}`",
+                    config.network,
+                    config.observation.name()
                 );
                 model
             }

@@ -1,6 +1,7 @@
 //! PF-net's architecture as data: the paper configuration and a compact one for CPU training.
 //! The config travels inside every checkpoint, so a file always says which network it holds.
 
+use super::observation::Observation;
 use super::spatial_transformer::LocalMapSpec;
 use serde::{Deserialize, Serialize};
 
@@ -41,7 +42,9 @@ impl ConvBranch {
 pub struct PfNetConfig {
     /// Channels of a particle's local map (1: free space).
     pub map_channels: usize,
-    /// Channels of the observation image (1: the LiDAR occupancy grid).
+    /// What the observation image holds (the paper: the LiDAR occupancy grid).
+    pub observation: Observation,
+    /// Channels of the observation image: the observation's.
     pub obs_channels: usize,
     /// The local map each particle sees (paper: 28 × 28 cells of 0.1 m).
     pub local_map: LocalMapSpec,
@@ -72,6 +75,7 @@ impl PfNetConfig {
     pub fn paper() -> Self {
         Self {
             map_channels: 1,
+            observation: Observation::Grid,
             obs_channels: 1,
             local_map: LocalMapSpec::default(),
             obs_cells: 56,
@@ -121,6 +125,11 @@ impl PfNetConfig {
         }
     }
 
+    /// This configuration observing `observation` instead.
+    pub fn observing(self, observation: Observation) -> Self {
+        Self { observation, obs_channels: observation.channels(), ..self }
+    }
+
     /// A named configuration (`paper` or `compact`).
     pub fn named(name: &str) -> Option<Self> {
         match name {
@@ -146,8 +155,16 @@ impl PfNetConfig {
                 return Err(format!("{field}: expected filters, kernel and dilation ≥ 1"));
             }
         }
-        if self.map_channels == 0 || self.obs_channels == 0 {
-            return Err("map_channels, obs_channels: expected at least 1".into());
+        if self.map_channels == 0 {
+            return Err("map_channels: expected at least 1".into());
+        }
+        if self.obs_channels != self.observation.channels() {
+            return Err(format!(
+                "obs_channels: expected {} for observation `{}`, found {}",
+                self.observation.channels(),
+                self.observation.name(),
+                self.obs_channels
+            ));
         }
         if self.local_map.cells * 2 != self.obs_cells
             || !self.local_map.cells.is_multiple_of(4)
@@ -169,6 +186,14 @@ impl PfNetConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn observation_channels_are_checked_by_name() {
+        let two = PfNetConfig::compact().observing(Observation::GridAndDepth);
+        assert_eq!((two.obs_channels, two.check()), (2, Ok(())));
+        let err = PfNetConfig { obs_channels: 1, ..two }.check().unwrap_err();
+        assert_eq!(err, "obs_channels: expected 2 for observation `grid_and_depth`, found 1");
+    }
 
     #[test]
     fn local_map_sides_are_checked_by_name() {
