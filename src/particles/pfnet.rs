@@ -304,7 +304,7 @@ mod tests {
         let mut maps = vec![0.0; 3 * model.local_map_len()];
         crop_local_maps(&map_view(&map), &xs, &ys, &yaws, &LocalMapSpec::default(), &mut maps);
         // The training path: the joint stage on concatenated features, not the system's split one.
-        let loglik = model.step_forward(obs, (&maps, MapInput::LocalMaps), 3, &mut ws);
+        let loglik = model.forward_steps(obs, (&maps, MapInput::LocalMaps), 1, 3, &mut ws);
         let total: f32 = loglik.iter().map(|l| l.exp()).sum();
         loglik.iter().map(|l| l.exp() / total).collect()
     }

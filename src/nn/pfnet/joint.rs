@@ -52,18 +52,6 @@ pub struct JointActivations {
     scratch: Vec<f32>,
 }
 
-impl JointActivations {
-    /// Trades the buffers only a pass in flight uses (gradients, im2col) with `other`, so activations kept
-    /// for a later backward do not hold them.
-    pub(super) fn trade_scratch(&mut self, other: &mut Self) {
-        std::mem::swap(&mut self.dinput, &mut other.dinput);
-        std::mem::swap(&mut self.grad_local, &mut other.grad_local);
-        std::mem::swap(&mut self.grad_pooled, &mut other.grad_pooled);
-        std::mem::swap(&mut self.grad_relu, &mut other.grad_relu);
-        std::mem::swap(&mut self.scratch, &mut other.scratch);
-    }
-}
-
 impl Joint {
     pub fn new(
         params: &mut Params,

@@ -42,18 +42,6 @@ pub struct MapActivations {
     scratch: Vec<f32>,
 }
 
-impl MapActivations {
-    /// Trades the buffers only a pass in flight uses (one particle's norm, gradients, im2col) with `other`, so activations kept
-    /// for a later backward do not hold them.
-    pub(super) fn trade_scratch(&mut self, other: &mut Self) {
-        std::mem::swap(&mut self.norm1, &mut other.norm1);
-        std::mem::swap(&mut self.grad_a, &mut other.grad_a);
-        std::mem::swap(&mut self.grad_b, &mut other.grad_b);
-        std::mem::swap(&mut self.grad_c, &mut other.grad_c);
-        std::mem::swap(&mut self.scratch, &mut other.scratch);
-    }
-}
-
 impl MapEncoder {
     pub fn new(params: &mut Params, config: &PfNetConfig, rng: &mut impl Rng) -> Self {
         let convs1 = Branches::new(params, "m", config.map_channels, &config.map_stage1, rng);

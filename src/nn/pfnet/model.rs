@@ -31,7 +31,7 @@ pub enum MapInput {
     Features,
 }
 
-/// What one filter step's forward pass leaves for its backward.
+/// What a forward pass leaves for its backward.
 #[derive(Clone, Debug, Default)]
 pub struct StepActivations {
     pub map: MapActivations,
@@ -39,25 +39,10 @@ pub struct StepActivations {
     pub joint: JointActivations,
 }
 
-impl StepActivations {
-    /// Swaps these activations with `kept` but keeps this side's scratch buffers (im2col,
-    /// gradients: most of a step's memory), so a sequence's kept steps hold only what their
-    /// backward reads.
-    pub(super) fn swap_keeping_scratch(&mut self, kept: &mut Self) {
-        std::mem::swap(self, kept);
-        self.map.trade_scratch(&mut kept.map);
-        self.obs.trade_scratch(&mut kept.obs);
-        self.joint.trade_scratch(&mut kept.joint);
-    }
-}
-
 /// Buffers for one thread's share of the work; reused across calls (they only grow).
 #[derive(Clone, Debug, Default)]
 pub struct Workspace {
     pub acts: StepActivations,
-    /// Every step's activations of the training sequence in flight, kept for its backward pass
-    /// (see `train_step.rs`).
-    pub(super) kept: Vec<StepActivations>,
     /// A parallel task's map features before the joint stage (see `batch.rs`).
     pub chunk_map_features: Vec<f32>,
     grad_map_features: Vec<f32>,
@@ -156,59 +141,64 @@ impl PfNet {
         loglik.copy_from_slice(&acts.loglik[..owner.len()]);
     }
 
-    /// One filter step's log-likelihoods for `k` particles sharing one observation, leaving the
-    /// activations in `ws.acts` for `step_backward`.
-    pub fn step_forward<'w>(
+    /// The log-likelihoods of `steps` filter steps of `k` particles each, the particles of a step
+    /// sharing its observation: obs [steps][obs_len], maps [steps·k][…] → loglik [steps·k],
+    /// leaving the activations in `ws.acts` for `backward_steps`. A training sequence passes its
+    /// T steps at once (no step's likelihoods depend on another's): T·K particles keep the joint
+    /// stage's products wide, where a step's K = 30 leave them bound by per-call overhead.
+    pub fn forward_steps<'w>(
         &self,
         obs: &[f32],
         (maps, input): (&[f32], MapInput),
+        steps: usize,
         k: usize,
         ws: &'w mut Workspace,
     ) -> &'w [f32] {
-        let (p, acts) = (&self.params, &mut ws.acts);
-        self.obs.forward(p, obs, 1, &mut acts.obs);
+        let (p, acts, n) = (&self.params, &mut ws.acts, steps * k);
+        self.obs.forward(p, obs, steps, &mut acts.obs);
         let map_features = match input {
             MapInput::LocalMaps => {
-                self.map.forward(p, maps, k, &mut acts.map);
+                self.map.forward(p, maps, n, &mut acts.map);
                 &acts.map.features
             }
             MapInput::Features => maps,
         };
-        self.fill_joint_input(map_features, &acts.obs.features, k, &mut acts.joint);
-        self.joint.forward(p, k, &mut acts.joint);
-        &acts.joint.loglik[..k]
+        self.fill_joint_input(map_features, &acts.obs.features, n, k, &mut acts.joint);
+        self.joint.forward(p, n, &mut acts.joint);
+        &acts.joint.loglik[..n]
     }
 
-    /// The backward pass of the `step_forward` whose activations are in `ws.acts`: from
-    /// d loss / d loglik of its `k` particles, accumulates every weight gradient into `grads`
-    /// (laid out like `params`).
-    pub fn step_backward(
+    /// The backward pass of the `forward_steps` whose activations are in `ws.acts`: from
+    /// d loss / d loglik of its `steps·k` particles, accumulates every weight gradient into
+    /// `grads` (laid out like `params`).
+    pub fn backward_steps(
         &self,
         obs: &[f32],
         (maps, input): (&[f32], MapInput),
-        k: usize,
+        (steps, k): (usize, usize),
         dloglik: &[f32],
         grads: &mut [f32],
         ws: &mut Workspace,
     ) {
-        let (p, acts) = (&self.params, &mut ws.acts);
-        self.joint.backward(p, k, &mut acts.joint, dloglik, grads);
-        let (per_particle, map_len) = (self.joint.input_len(), self.map_feature_len());
+        let (p, acts, n) = (&self.params, &mut ws.acts, steps * k);
+        self.joint.backward(p, n, &mut acts.joint, dloglik, grads);
+        let (per_particle, map_len, obs_len) =
+            (self.joint.input_len(), self.map_feature_len(), self.obs_feature_len());
         let (dmap, dobs) = (&mut ws.grad_map_features, &mut ws.grad_obs_features);
-        dmap.resize(k * map_len, 0.0);
+        dmap.resize(n * map_len, 0.0);
         dobs.clear();
-        dobs.resize(self.obs_feature_len(), 0.0);
-        for (i, dinput) in acts.joint.dinput.chunks_exact(per_particle).take(k).enumerate() {
+        dobs.resize(steps * obs_len, 0.0);
+        for (i, dinput) in acts.joint.dinput.chunks_exact(per_particle).take(n).enumerate() {
             dmap[i * map_len..(i + 1) * map_len].copy_from_slice(&dinput[..map_len]);
-            // Every particle saw the same observation features: their gradients add up.
-            for (d, g) in dobs.iter_mut().zip(&dinput[map_len..]) {
+            // The particles of a step saw the same observation features: their gradients add up.
+            for (d, g) in dobs[i / k * obs_len..][..obs_len].iter_mut().zip(&dinput[map_len..]) {
                 *d += g;
             }
         }
         if input == MapInput::LocalMaps {
-            self.map.backward(p, maps, k, &mut acts.map, dmap, grads);
+            self.map.backward(p, maps, n, &mut acts.map, dmap, grads);
         }
-        self.obs.backward(p, obs, 1, &mut acts.obs, dobs, grads);
+        self.obs.backward(p, obs, steps, &mut acts.obs, dobs, grads);
     }
 
     /// One filter step on its own: forward, `loss` turns the log-likelihoods into (loss,
@@ -223,8 +213,8 @@ impl PfNet {
         ws: &mut Workspace,
     ) -> f64 {
         let maps = (maps, MapInput::LocalMaps);
-        let (value, dloglik) = loss(self.step_forward(obs, maps, k, ws));
-        self.step_backward(obs, maps, k, &dloglik, grads, ws);
+        let (value, dloglik) = loss(self.forward_steps(obs, maps, 1, k, ws));
+        self.backward_steps(obs, maps, (1, k), &dloglik, grads, ws);
         value
     }
 
@@ -233,19 +223,22 @@ impl PfNet {
         &self.map
     }
 
-    /// Map features first, then the observation's features, per particle (the reference's concat order).
+    /// Map features first, then the features of its step's observation, per particle (the
+    /// reference's concat order); particle i belongs to step i / k.
     fn fill_joint_input(
         &self,
         map_features: &[f32],
         obs_features: &[f32],
         n: usize,
+        k: usize,
         acts: &mut JointActivations,
     ) {
         let (m, o) = (self.map_feature_len(), self.obs_feature_len());
         acts.input.resize(n * (m + o), 0.0);
-        for (row, map) in acts.input.chunks_exact_mut(m + o).zip(map_features.chunks_exact(m)).take(n) {
+        let rows = acts.input.chunks_exact_mut(m + o).zip(map_features.chunks_exact(m)).take(n);
+        for (i, (row, map)) in rows.enumerate() {
             row[..m].copy_from_slice(map);
-            row[m..].copy_from_slice(&obs_features[..o]);
+            row[m..].copy_from_slice(&obs_features[i / k * o..][..o]);
         }
     }
 }

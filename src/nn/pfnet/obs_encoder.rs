@@ -41,16 +41,6 @@ pub struct ObsActivations {
     scratch: Vec<f32>,
 }
 
-impl ObsActivations {
-    /// Trades the buffers only a pass in flight uses (gradients, im2col) with `other`, so activations kept
-    /// for a later backward do not hold them.
-    pub(super) fn trade_scratch(&mut self, other: &mut Self) {
-        std::mem::swap(&mut self.grad_a, &mut other.grad_a);
-        std::mem::swap(&mut self.grad_b, &mut other.grad_b);
-        std::mem::swap(&mut self.scratch, &mut other.scratch);
-    }
-}
-
 impl ObsEncoder {
     pub fn new(params: &mut Params, config: &PfNetConfig, rng: &mut impl Rng) -> Self {
         let convs1 = Branches::new(params, "o", config.obs_channels, &config.obs_stage1, rng);

@@ -79,51 +79,48 @@ impl PfNet {
         let sequences = batch.steps().div_ceil(batch.sequence.max(1));
         let losses: Vec<f64> = (0..sequences)
             .into_par_iter()
-            .map(|sequence| pool.with(|ws| self.sequence_forward(batch, sequence, loss, false, ws).0))
+            .map(|sequence| pool.with(|ws| self.sequence_forward(batch, sequence, loss, ws).0))
             .collect();
         losses.iter().sum()
     }
 
-    /// One sequence forward: every step's log-likelihoods accumulate into log-weights, every
-    /// step's weighted mean is scored. Returns the loss and d loss / d loglik per step (a step's
-    /// log-likelihoods count in every later step's weights: the sum of later d loss / d log_w).
-    /// With `keep`, step i's activations stay in `ws.kept[i]` for the backward pass.
+    /// One sequence forward, all its steps in one pass (`forward_steps`, which leaves the
+    /// activations in `ws.acts` for the backward): every step's log-likelihoods accumulate into
+    /// log-weights, every step's weighted mean is scored. Returns the loss and d loss / d loglik
+    /// [steps·k] (a step's log-likelihoods count in every later step's weights: the sum of later
+    /// d loss / d log_w).
     fn sequence_forward(
         &self,
         batch: &StepBatch,
         sequence: usize,
         loss: &PoseLoss,
-        keep: bool,
         ws: &mut Workspace,
-    ) -> (f64, Vec<Vec<f32>>) {
-        let k = batch.k;
+    ) -> (f64, Vec<f32>) {
+        let (steps, k) = (self.sequence_steps(batch, sequence), batch.k);
+        let loglik = self.forward_steps(
+            self.steps_obs(batch, &steps),
+            self.steps_maps(batch, &steps),
+            steps.len(),
+            k,
+            ws,
+        );
         let mut log_w = vec![0.0f32; k];
-        let (mut value, mut dloglik) = (0.0, Vec::with_capacity(batch.sequence));
-        for (i, s) in self.sequence_steps(batch, sequence).enumerate() {
-            let loglik = self.step_forward(self.step_obs(batch, s), self.step_maps(batch, s), k, ws);
-            log_w.iter_mut().zip(loglik).for_each(|(w, l)| *w += l);
-            if keep {
-                if ws.kept.len() <= i {
-                    ws.kept.push(Default::default());
-                }
-                // A swap, not a copy: the step's buffers move out and last sequence's come back
-                // to be overwritten, so a warm workspace allocates nothing.
-                ws.acts.swap_keeping_scratch(&mut ws.kept[i]);
-            }
+        let (mut value, mut dloglik) = (0.0, Vec::with_capacity(loglik.len()));
+        for (s, step_loglik) in steps.zip(loglik.chunks_exact(k)) {
+            log_w.iter_mut().zip(step_loglik).for_each(|(w, l)| *w += l);
             let (l, d) = loss.evaluate(&log_w, &batch.states[s * k..(s + 1) * k], batch.targets[s]);
             value += l;
-            dloglik.push(d);
+            dloglik.extend(d);
         }
-        for t in (1..dloglik.len()).rev() {
+        for t in (k..dloglik.len()).step_by(k).rev() {
             let (earlier, later) = dloglik.split_at_mut(t);
-            earlier[t - 1].iter_mut().zip(&later[0]).for_each(|(e, l)| *e += l);
+            earlier[t - k..].iter_mut().zip(&later[..k]).for_each(|(e, l)| *e += l);
         }
         (value, dloglik)
     }
 
-    /// One sequence's loss and gradient: the forward pass above keeping every step's
-    /// activations (T steps of one sequence per thread; the README's speed table has the peak
-    /// memory this costs), then each step's backward from them instead of a second forward.
+    /// One sequence's loss and gradient: the forward pass above, then its backward from the
+    /// activations it left (the README's speed table has the peak memory this costs).
     fn sequence_gradient(
         &self,
         batch: &StepBatch,
@@ -133,11 +130,10 @@ impl PfNet {
         pool: &Workspaces,
     ) -> f64 {
         pool.with(|ws| {
-            let (value, dloglik) = self.sequence_forward(batch, sequence, loss, true, ws);
-            for ((i, s), d) in self.sequence_steps(batch, sequence).enumerate().zip(dloglik) {
-                ws.acts.swap_keeping_scratch(&mut ws.kept[i]);
-                self.step_backward(self.step_obs(batch, s), self.step_maps(batch, s), batch.k, &d, grads, ws);
-            }
+            let (value, dloglik) = self.sequence_forward(batch, sequence, loss, ws);
+            let steps = self.sequence_steps(batch, sequence);
+            let (obs, maps) = (self.steps_obs(batch, &steps), self.steps_maps(batch, &steps));
+            self.backward_steps(obs, maps, (steps.len(), batch.k), &dloglik, grads, ws);
             value
         })
     }
@@ -147,17 +143,17 @@ impl PfNet {
         sequence * t..((sequence + 1) * t).min(batch.steps())
     }
 
-    fn step_obs<'a>(&self, batch: &StepBatch<'a>, s: usize) -> &'a [f32] {
-        &batch.obs[s * self.obs_len()..(s + 1) * self.obs_len()]
+    fn steps_obs<'a>(&self, batch: &StepBatch<'a>, steps: &std::ops::Range<usize>) -> &'a [f32] {
+        &batch.obs[steps.start * self.obs_len()..steps.end * self.obs_len()]
     }
 
-    fn step_maps<'a>(&self, batch: &StepBatch<'a>, s: usize) -> (&'a [f32], MapInput) {
+    fn steps_maps<'a>(&self, batch: &StepBatch<'a>, steps: &std::ops::Range<usize>) -> (&'a [f32], MapInput) {
         let per_particle = match batch.input {
             MapInput::LocalMaps => self.local_map_len(),
             MapInput::Features => self.map_feature_len(),
         };
         let len = per_particle * batch.k;
-        (&batch.maps[s * len..(s + 1) * len], batch.input)
+        (&batch.maps[steps.start * len..steps.end * len], batch.input)
     }
 
     /// forward → loss → backward → Adam; returns the loss before the update.
@@ -231,6 +227,41 @@ mod tests {
         }
         let last = model.batch_gradient(&batch, &loss, &mut grads, &pool);
         assert!(last < first, "six Adam steps on one batch must lower its loss: {first} → {last}");
+    }
+
+    #[test]
+    fn a_sequence_in_one_pass_equals_its_steps_one_by_one() {
+        // forward_steps over 3 steps must give each step the likelihoods it gets alone (its own
+        // observation for its own particles), and backward_steps the sum of the steps' gradients,
+        // so batching a sequence changes only the speed.
+        let model = PfNet::new(PfNetConfig::compact(), 5).unwrap();
+        let data = TestBatch::new(&model);
+        let (batch, mut ws) = (data.batch(3), Workspace::default());
+        let dloglik: Vec<f32> = (0..12).map(|i| 0.1 * (i as f32 - 5.5)).collect();
+        let steps = |r: std::ops::Range<usize>| (model.steps_obs(&batch, &r), model.steps_maps(&batch, &r));
+        let close = |a: f32, b: f32, scale: f32| (a - b).abs() <= 1e-4 * scale.max(1e-3);
+
+        let (obs, maps) = steps(0..3);
+        let together = model.forward_steps(obs, maps, 3, 4, &mut ws).to_vec();
+        let mut grads_together = vec![0.0; model.params.len()];
+        model.backward_steps(obs, maps, (3, 4), &dloglik, &mut grads_together, &mut ws);
+
+        let mut grads_alone = vec![0.0; model.params.len()];
+        for s in 0..3 {
+            let (obs, maps) = steps(s..s + 1);
+            let alone = model.forward_steps(obs, maps, 1, 4, &mut ws).to_vec();
+            for (a, b) in alone.iter().zip(&together[4 * s..4 * s + 4]) {
+                assert!(close(*a, *b, a.abs()), "step {s}: alone {a} vs together {b}");
+            }
+            model.backward_steps(obs, maps, (1, 4), &dloglik[4 * s..4 * s + 4], &mut grads_alone, &mut ws);
+        }
+        for (id, spec) in model.params.specs() {
+            let (want, got) = (model.params.of(&grads_alone, id), model.params.of(&grads_together, id));
+            let scale = want.iter().fold(0.0f32, |m, g| m.max(g.abs()));
+            for (w, g) in want.iter().zip(got) {
+                assert!(close(*w, *g, scale), "{}: steps one by one {w} vs together {g}", spec.name);
+            }
+        }
     }
 
     #[test]
