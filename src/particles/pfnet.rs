@@ -48,6 +48,11 @@ pub struct PfNetLikelihoodParams {
     pub features: MapFeatures,
     /// Orientations the cached feature banks are encoded at (2π / N apart).
     pub orientations: usize,
+    /// Multiplies the network's log-likelihoods before they reach the weights: a temperature.
+    /// The network was trained on sequences without resampling, so its likelihoods are as sharp as
+    /// that loss made them; below 1 the filter trusts each scan less and keeps more hypotheses
+    /// alive through resampling.
+    pub likelihood_scale: f32,
 }
 
 impl Default for PfNetLikelihoodParams {
@@ -58,6 +63,7 @@ impl Default for PfNetLikelihoodParams {
             seed: 0,
             features: MapFeatures::Exact,
             orientations: FeatureCacheSpec::default().orientations,
+            likelihood_scale: 1.0,
         }
     }
 }
@@ -67,6 +73,11 @@ impl StepParams for PfNetLikelihoodParams {
     /// schedule loads, naming the file.
     fn check(&self) -> Result<(), String> {
         expect_param((1..=1024).contains(&self.orientations), "orientations", "1 to 1024")?;
+        expect_param(
+            self.likelihood_scale.is_finite() && self.likelihood_scale > 0.0,
+            "likelihood_scale",
+            "a finite number > 0",
+        )?;
         shared_model(self).map(|_| ())
     }
 }
@@ -243,7 +254,7 @@ pub fn pfnet_likelihood(
         first += set.len();
         let outcome = set.weigh_with(|set| {
             for (w, l) in set.log_w.iter_mut().zip(loglik) {
-                *w += l;
+                *w += params.likelihood_scale * l;
             }
             Ok(())
         });
@@ -331,6 +342,21 @@ mod tests {
         let (a, b) =
             (world.get::<ParticleSet>(robots[0]).unwrap(), world.get::<ParticleSet>(robots[1]).unwrap());
         assert_ne!(a.log_w, b.log_w, "different observations must give different weights");
+    }
+
+    #[test]
+    fn pfnet_likelihood_scale_tempers_the_weights() {
+        let (mut world, robots) = world_with_robots(&[grid(0)], MapFeatures::Exact);
+        world.resource_mut::<PfNetLikelihoodParams>().likelihood_scale = 0.5;
+        world.run_system_once(pfnet_likelihood).expect("system runs");
+        let model =
+            shared_model(&PfNetLikelihoodParams { config: "compact".into(), ..Default::default() }).unwrap();
+        let full = expected_weights(&model, &grid(0).values);
+        let total: f32 = full.iter().map(|w| w.sqrt()).sum();
+        let weights = world.get::<ParticleSet>(robots[0]).unwrap().weights();
+        for (w, f) in weights.iter().zip(&full) {
+            assert!((w - f.sqrt() / total).abs() < 1e-5, "weights {weights:?} are not ∝ √{full:?}");
+        }
     }
 
     #[test]

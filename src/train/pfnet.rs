@@ -55,6 +55,12 @@ pub struct TrainPfNetConfig {
     /// Spread of the initial particles and of the perturbation of their centre (paper: 0.3 m, 30°).
     pub init_std_m: f32,
     pub init_std_deg: f32,
+    /// Fraction of each sequence's particles drawn instead uniformly over a square of `wide_box_m`
+    /// around the perturbed centre, with any heading (beyond the paper, whose particles all start
+    /// near the truth: the filter's semi-global start asks the network to tell apart hypotheses
+    /// metres away, which these particles teach it).
+    pub wide_fraction: f32,
+    pub wide_box_m: f32,
     /// Heading weight β of the loss (paper: 0.36).
     pub heading_weight: f32,
     /// Adam (the paper's table: 2.5e-3; the authors' code: 5e-5 constant).
@@ -100,6 +106,8 @@ impl Default for TrainPfNetConfig {
             particles: 30,
             init_std_m: 0.3,
             init_std_deg: 30.0,
+            wide_fraction: 0.0,
+            wide_box_m: 3.3,
             heading_weight: 0.36,
             adam: AdamConfig { learning_rate: 1e-3, ..AdamConfig::default() },
             final_learning_rate: None,
@@ -136,6 +144,15 @@ impl TrainPfNetConfig {
         }
         if self.train_steps == 0 || self.eval_every == 0 {
             return Err("train_steps, eval_every: expected at least 1".into());
+        }
+        if !(0.0..=1.0).contains(&self.wide_fraction) {
+            return Err(format!("wide_fraction: expected 0 to 1, found {}", self.wide_fraction));
+        }
+        if !(self.wide_box_m > 0.0 && self.wide_box_m <= 100.0) {
+            return Err(format!(
+                "wide_box_m: expected more than 0 and at most 100 m, found {}",
+                self.wide_box_m
+            ));
         }
         if !(self.adam.learning_rate > 0.0 && self.adam.learning_rate.is_finite()) {
             return Err("adam.learning_rate: expected a positive number".into());
@@ -284,10 +301,24 @@ impl BatchBuffers {
         let (std_m, std_rad) = (config.init_std_m, config.init_std_deg.to_radians());
         let (pos, rot) = (Normal::new(0.0, std_m).expect("σ ≥ 0"), Normal::new(0.0, std_rad).expect("σ ≥ 0"));
         let noise = |rng: &mut _| Pose2::new(pos.sample(rng), pos.sample(rng), rot.sample(rng));
+        let wide = (config.wide_fraction * k as f32).round() as usize;
+        let half_box = 0.5 * config.wide_box_m;
         for (b, &e) in episodes.iter().enumerate() {
             let episode: &RecordedEpisode = &data.episodes[e];
             let centre = add(episode.poses[0], noise(rng));
-            let mut particles: Vec<Pose2> = (0..k).map(|_| add(centre, noise(rng))).collect();
+            let mut particles: Vec<Pose2> = (0..k)
+                .map(|i| {
+                    if i < wide {
+                        Pose2::new(
+                            centre.x + rng.random_range(-half_box..half_box),
+                            centre.y + rng.random_range(-half_box..half_box),
+                            rng.random_range(-std::f32::consts::PI..std::f32::consts::PI),
+                        )
+                    } else {
+                        add(centre, noise(rng))
+                    }
+                })
+                .collect();
             for step in 0..t {
                 if step > 0 {
                     particles.iter_mut().for_each(|p| *p = p.compose(&episode.odometry[step]));
@@ -454,5 +485,54 @@ impl TrainState {
         let loss = self.model.train_step(&buffers.batch(config), &config.loss(), &mut self.adam, grads, pool);
         self.step += 1;
         loss
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The x, y and heading ranges (max − min) of particles `range` of every sequence's first step.
+    fn spreads(states: &[[f32; 3]], k: usize, t: usize, range: std::ops::Range<usize>) -> [f32; 3] {
+        let mut spread = [0.0f32; 3];
+        for first in states.chunks(k * t).map(|sequence| &sequence[..k]) {
+            for (axis, s) in spread.iter_mut().enumerate() {
+                let values = first[range.clone()].iter().map(|p| p[axis]);
+                let (lo, hi) = values.fold((f32::MAX, f32::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+                *s = s.max(hi - lo);
+            }
+        }
+        spread
+    }
+
+    #[test]
+    fn wide_particles_fill_their_box_with_any_heading_and_the_rest_stay_near() {
+        let config = TrainPfNetConfig {
+            train_maps: 1,
+            val_maps: 1,
+            train_episodes: 3,
+            val_episodes: 1,
+            steps: 2,
+            batch: 3,
+            particles: 40,
+            wide_fraction: 0.25,
+            ..TrainPfNetConfig::default()
+        };
+        config.check().unwrap();
+        let [data, _] = simulate_data(&config, |_, _| {}).unwrap();
+        let model = TrainState::new(&config).unwrap().model;
+        let mut buffers = BatchBuffers::default();
+        buffers.fill(&config, &model, (&data, &[]), &[0, 1, 2], &mut stream(&[1]));
+        let [wide_x, wide_y, wide_yaw] = spreads(&buffers.states, 40, 2, 0..10);
+        let [near_x, near_y, near_yaw] = spreads(&buffers.states, 40, 2, 10..40);
+        assert!(wide_x > 2.0 && wide_y > 2.0, "10 wide particles span most of 3.3 m: {wide_x}, {wide_y}");
+        assert!(wide_x <= 3.3 && wide_y <= 3.3, "and stay in the box: {wide_x}, {wide_y}");
+        assert!(wide_yaw > 3.0, "with any heading: {wide_yaw} rad");
+        assert!(
+            near_x < 2.0 && near_y < 2.0 && near_yaw < 3.0,
+            "σ 0.3 m / 30°: {near_x}, {near_y}, {near_yaw}"
+        );
+        let wider = TrainPfNetConfig { wide_fraction: 1.5, ..config };
+        assert_eq!(wider.check().unwrap_err(), "wide_fraction: expected 0 to 1, found 1.5");
     }
 }
