@@ -2,6 +2,7 @@
 //! resumed from its checkpoint writes the same next checkpoint, byte for byte, as a run that was
 //! never interrupted, and training lowers the validation loss of a fixed batch.
 
+use apfn::nn::adam::AdamConfig;
 use apfn::nn::checkpoint::Checkpoint;
 use apfn::nn::pfnet::{
     FeatureCacheSpec, GradBuffers, Observation, PfNet, PfNetConfig, Workspaces, is_map_encoder_param,
@@ -21,7 +22,9 @@ fn tiny() -> TrainPfNetConfig {
         train_steps: 4,
         eval_every: 2,
         seed: 5,
-        // A decaying rate, so resuming must also pick the schedule up where it stopped.
+        // A decaying rate, so resuming must also pick the schedule up where it stopped; large, so
+        // that four steps move the weights measurably.
+        adam: AdamConfig { learning_rate: 1e-3, ..AdamConfig::default() },
         final_learning_rate: Some(1e-4),
         ..TrainPfNetConfig::default()
     }
