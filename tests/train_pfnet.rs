@@ -85,6 +85,22 @@ fn train_pfnet_learning_rate_follows_a_half_cosine() {
 }
 
 #[test]
+fn train_pfnet_resume_may_extend_a_constant_rate_run_and_nothing_else() {
+    let saved = TrainPfNetConfig { final_learning_rate: None, ..tiny() };
+    let longer = TrainPfNetConfig { train_steps: saved.train_steps * 3, eval_every: 7, ..saved.clone() };
+    assert!(longer.continues(&saved), "a constant-rate run extends");
+    let other_seed = TrainPfNetConfig { seed: saved.seed + 1, ..longer.clone() };
+    assert!(!other_seed.continues(&saved), "another seed is another run");
+    let other_rate =
+        TrainPfNetConfig { adam: AdamConfig { learning_rate: 1e-2, ..saved.adam }, ..saved.clone() };
+    assert!(!other_rate.continues(&saved), "another learning rate is another run");
+    let cosine = TrainPfNetConfig { final_learning_rate: Some(1e-5), ..saved };
+    let cosine_longer = TrainPfNetConfig { train_steps: cosine.train_steps * 3, ..cosine.clone() };
+    assert!(!cosine_longer.continues(&cosine), "a cosine schedule is laid out over train_steps");
+    assert!(cosine.continues(&cosine));
+}
+
+#[test]
 fn train_pfnet_resume_writes_the_same_checkpoint_bytes() {
     let config = tiny();
     let [train, _] = simulate_data(&config, |_, _| {}).unwrap();

@@ -61,8 +61,9 @@ pub fn run(args: TrainPfNetArgs) -> anyhow::Result<()> {
         let file = Checkpoint::load(&last)?;
         let saved = file.metadata.get("train_config").map(String::as_str).unwrap_or_default();
         anyhow::ensure!(
-            ron::from_str::<TrainPfNetConfig>(saved).ok().as_ref() == Some(&config),
-            "--resume: {} was trained with another config than {}",
+            ron::from_str::<TrainPfNetConfig>(saved).is_ok_and(|saved| config.continues(&saved)),
+            "--resume: {} was trained with another config than {} (only `train_steps`, when the \
+             learning rate is constant, and `eval_every` may change)",
             last.display(),
             args.config.display()
         );

@@ -187,6 +187,15 @@ impl TrainPfNetConfig {
         }
     }
 
+    /// Whether a run saved under `saved` may continue under `self`: only `train_steps` and
+    /// `eval_every` may differ (to extend a finished run), and `train_steps` only while the
+    /// learning rate is constant, since a cosine schedule is laid out over it.
+    pub fn continues(&self, saved: &Self) -> bool {
+        let steps_free = self.final_learning_rate.is_none();
+        let train_steps = if steps_free { self.train_steps } else { saved.train_steps };
+        Self { train_steps, eval_every: self.eval_every, ..saved.clone() } == *self
+    }
+
     /// The learning rate of gradient step `step` (0-based).
     pub fn learning_rate_at(&self, step: u64) -> f32 {
         let start = self.adam.learning_rate;
