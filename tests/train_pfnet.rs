@@ -8,7 +8,10 @@ use apfn::nn::pfnet::{
     FeatureCacheSpec, GradBuffers, Observation, PfNet, PfNetConfig, Workspaces, is_map_encoder_param,
 };
 use apfn::particles::MapFeatures;
-use apfn::train::pfnet::{BatchBuffers, TrainPfNetConfig, TrainState, feature_banks, simulate_data};
+use apfn::train::pfnet::{
+    BatchBuffers, ExtraTrainMaps, TrainPfNetConfig, TrainState, feature_banks, simulate_data,
+};
+use apfn::world::map::procedural::ApartmentParams;
 
 fn tiny() -> TrainPfNetConfig {
     TrainPfNetConfig {
@@ -42,6 +45,34 @@ fn train_pfnet_data_are_deterministic_and_shaped() {
         assert_eq!(e.grids.len(), 4 * 56 * 56, "one 56 × 56 grid per step");
         assert_eq!(e.depths.len(), 4 * 56, "one 56-column depth strip per step");
     }
+}
+
+#[test]
+fn train_pfnet_mixes_extra_apartments_into_training_only() {
+    let hall = ApartmentParams {
+        min_side_m: 12.0,
+        max_side_m: 14.0,
+        min_rooms: 1,
+        max_rooms: 1,
+        ..tiny().apartment
+    };
+    let extra = ExtraTrainMaps { maps: 1, episodes: 5, apartment: hall };
+    let config = TrainPfNetConfig { extra_train: vec![extra], ..tiny() };
+    let [plain_train, plain_val] = simulate_data(&tiny(), |_, _| {}).unwrap();
+    let [train, val] = simulate_data(&config, |_, _| {}).unwrap();
+    assert_eq!(val.episodes, plain_val.episodes, "validation stays on the main apartments");
+    assert_eq!(train.episodes[..12], plain_train.episodes[..], "the main episodes come first, unchanged");
+    assert_eq!((train.episodes.len(), train.maps.len()), (17, 3), "5 more episodes on 1 more map");
+    assert!(train.episodes[12..].iter().all(|e| e.map == 2), "extra episodes index the extra map");
+    let side = |m: &apfn::world::map::NetworkMap| m.width.max(m.height) as f32 * m.resolution_m;
+    assert!(side(&train.maps[2]) > 12.0, "the extra map has its own shape: {} m", side(&train.maps[2]));
+
+    let bad = TrainPfNetConfig {
+        extra_train: vec![ExtraTrainMaps { maps: 0, ..config.extra_train[0].clone() }],
+        ..tiny()
+    };
+    let err = bad.check().unwrap_err();
+    assert!(err.starts_with("extra_train[0].maps"), "unhelpful error: {err}");
 }
 
 #[test]

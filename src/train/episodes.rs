@@ -48,6 +48,25 @@ impl EpisodeSet {
     pub fn steps(&self) -> usize {
         self.episodes.first().map_or(0, |e| e.poses.len())
     }
+
+    /// Appends `other`'s maps and episodes (its episodes then index the appended maps).
+    pub fn extend(&mut self, other: EpisodeSet) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.episodes.is_empty()
+                || (other.grid_cells, other.depth_columns, other.steps())
+                    == (self.grid_cells, self.depth_columns, self.steps()),
+            "episode sets differ in grid side, depth columns or steps: {:?} against {:?}",
+            (other.grid_cells, other.depth_columns, other.steps()),
+            (self.grid_cells, self.depth_columns, self.steps())
+        );
+        let offset = self.maps.len();
+        self.maps.extend(other.maps);
+        self.map_names.extend(other.map_names);
+        self.episodes
+            .extend(other.episodes.into_iter().map(|e| RecordedEpisode { map: e.map + offset, ..e }));
+        (self.grid_cells, self.depth_columns) = (other.grid_cells, other.depth_columns);
+        Ok(())
+    }
 }
 
 /// Simulates `scene` under `pipeline` until `count` complete episodes are recorded (robots in

@@ -43,6 +43,10 @@ pub struct TrainPfNetConfig {
     pub val_maps: usize,
     /// Shape of the apartments (default: the paper's size range, scan realism on).
     pub apartment: ApartmentParams,
+    /// More seen apartments of other shapes mixed into the training episodes (validation stays on
+    /// `apartment`'s): e.g. halls, so that a model meets open space it would otherwise only see on
+    /// real maps. Default none.
+    pub extra_train: Vec<ExtraTrainMaps>,
     /// Episodes simulated for training (paper: 4,000) and validation.
     pub train_episodes: usize,
     pub val_episodes: usize,
@@ -93,6 +97,15 @@ pub struct TrainPfNetConfig {
     pub cache: FeatureCacheSpec,
 }
 
+/// `episodes` goalnav episodes on `maps` seen apartments of shape `apartment`.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ExtraTrainMaps {
+    pub maps: usize,
+    pub episodes: usize,
+    pub apartment: ApartmentParams,
+}
+
 impl Default for TrainPfNetConfig {
     fn default() -> Self {
         Self {
@@ -101,6 +114,7 @@ impl Default for TrainPfNetConfig {
             train_maps: 40,
             val_maps: 10,
             apartment: ApartmentParams::paper_size(),
+            extra_train: vec![],
             train_episodes: 4000,
             val_episodes: 64,
             steps: 25,
@@ -140,6 +154,14 @@ impl TrainPfNetConfig {
             if value == 0 || value > 1_000_000 {
                 return Err(format!("{field}: expected 1 to 1,000,000, found {value}"));
             }
+        }
+        for (i, extra) in self.extra_train.iter().enumerate() {
+            for (field, value) in [("maps", extra.maps), ("episodes", extra.episodes)] {
+                if value == 0 || value > 1_000_000 {
+                    return Err(format!("extra_train[{i}].{field}: expected 1 to 1,000,000, found {value}"));
+                }
+            }
+            extra.apartment.validate().map_err(|e| format!("extra_train[{i}].{e}"))?;
         }
         if !(1..=1000).contains(&self.steps) {
             return Err(format!("steps: expected 1 to 1,000, found {}", self.steps));
@@ -218,16 +240,11 @@ pub fn simulate_data(
 ) -> anyhow::Result<[EpisodeSet; 2]> {
     let registry = standard_registry();
     let pipeline = Pipeline::load(Path::new(&config.collect_schedule), &registry)?;
-    let simulate = |split: Split, maps: usize, count: usize, salt: u64| {
+    let simulate = |split: Split, maps: usize, count: usize, salt: u64, params: &ApartmentParams| {
         let mut scene = Scene::apartments(split, 0, maps, 4);
         scene.maps = match scene.maps {
             crate::compose::MapSource::Procedural { split, first, count, .. } => {
-                crate::compose::MapSource::Procedural {
-                    split,
-                    first,
-                    count,
-                    params: config.apartment.clone(),
-                }
+                crate::compose::MapSource::Procedural { split, first, count, params: params.clone() }
             }
             other => other,
         };
@@ -237,17 +254,21 @@ pub fn simulate_data(
         let name = if split == Split::Seen { "training" } else { "validation" };
         simulate_episodes(&loaded, pipeline.clone(), count, |done| progress(name, done))
     };
-    let train = match &config.data {
+    let mut train = match &config.data {
         Some(dir) => load_collection(Path::new(dir))?,
-        None => simulate(Split::Seen, config.train_maps, config.train_episodes, 0)?,
+        None => simulate(Split::Seen, config.train_maps, config.train_episodes, 0, &config.apartment)?,
     };
+    for (i, extra) in config.extra_train.iter().enumerate() {
+        let salt = 2 + i as u64; // 0 and 1 are the main training and validation sets
+        train.extend(simulate(Split::Seen, extra.maps, extra.episodes, salt, &extra.apartment)?)?;
+    }
     anyhow::ensure!(
         train.steps() == config.steps as usize,
         "data: episodes of {} steps, expected `steps` = {}",
         train.steps(),
         config.steps
     );
-    let validation = simulate(Split::Unseen, config.val_maps, config.val_episodes, 1)?;
+    let validation = simulate(Split::Unseen, config.val_maps, config.val_episodes, 1, &config.apartment)?;
     for (set, source) in [(&train, "data (or collect_schedule)"), (&validation, "collect_schedule")] {
         anyhow::ensure!(
             !config.observation.uses_depth() || set.depth_columns > 0,
