@@ -85,7 +85,9 @@ pub struct TrainPfNetConfig {
     /// `train_maps` (validation is always simulated on unseen apartments).
     pub data: Option<String>,
     /// A PF-net checkpoint to start from instead of fresh weights (fine-tuning; Adam starts
-    /// afresh), relative to the working directory.
+    /// afresh), relative to the working directory. A `grid` or `depth` checkpoint may start a
+    /// `grid_and_depth` run: its sensor's weights carry over and the other channel's start at
+    /// zero (`PfNet::widened_to`).
     pub init: Option<String>,
     /// The particles' map features: `exact` (each local map through the map encoder, the paper)
     /// or `cached` (crops of each map's feature banks, as `pfnet_likelihood` with `features:
@@ -456,6 +458,8 @@ impl TrainState {
             None => PfNet::new(network, config.seed).map_err(anyhow::Error::msg)?,
             Some(path) => {
                 let model = PfNet::load(Path::new(path)).with_context(|| format!("init: {path}"))?;
+                let model =
+                    model.widened_to(config.observation).map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
                 anyhow::ensure!(
                     model.config == network,
                     "init: {path} holds another network than `network: {}` observing `{}`",

@@ -14,7 +14,7 @@
 //! off at the store.
 
 use std::arch::x86_64::{
-    __m512, __mmask16, _mm512_fmadd_ps, _mm512_loadu_ps, _mm512_mask_storeu_ps, _mm512_maskz_loadu_ps,
+    __mmask16, _mm512_fmadd_ps, _mm512_loadu_ps, _mm512_mask_storeu_ps, _mm512_maskz_loadu_ps,
     _mm512_reduce_add_ps, _mm512_set1_ps, _mm512_setzero_ps,
 };
 
@@ -141,34 +141,54 @@ impl Plan {
         let vpr = self.vectors_per_row();
         let slots = self.oh * vpr;
         let (x, y) = (xpad.as_ptr(), y_n.as_mut_ptr());
-        for o0 in (0..self.c_out).step_by(OB) {
-            let o: [usize; OB] = std::array::from_fn(|i| (o0 + i).min(self.c_out - 1));
-            for t0 in (0..slots).step_by(S) {
-                let mut x_at = [0usize; S];
-                let mut y_at = [0usize; S];
-                let mut mask = [0 as __mmask16; S];
-                for s in 0..S {
-                    let t = (t0 + s).min(slots - 1);
-                    let (oy, v) = (t / vpr, t % vpr);
+        // Slot t is vector v of output row oy, walked rather than divided out of t; each slot tile
+        // is set up once for all channel tiles, which then reread only the (L1-resident) weights.
+        let (mut oy, mut v) = (0, 0);
+        let mut x_at = [0usize; S];
+        let mut y_at = [0usize; S];
+        let mut mask = [0 as __mmask16; S];
+        for t0 in (0..slots).step_by(S) {
+            for s in 0..S {
+                if t0 + s < slots {
                     x_at[s] = oy * wp + v * LANES;
                     y_at[s] = oy * self.ow + v * LANES;
                     let live = (self.ow - v * LANES).min(LANES);
                     mask[s] = ((1u32 << live) - 1) as __mmask16;
+                    v += 1;
+                    if v == vpr {
+                        (oy, v) = (oy + 1, 0);
+                    }
+                } else {
+                    // Past the last slot: repeat it (same values written twice).
+                    (x_at[s], y_at[s], mask[s]) = (x_at[s - 1], y_at[s - 1], mask[s - 1]);
                 }
-                let mut acc: [[__m512; S]; OB] = std::array::from_fn(|i| match bias {
-                    Some(b) => [_mm512_set1_ps(b[o[i]]); S],
-                    None => std::array::from_fn(|s| unsafe {
-                        _mm512_maskz_loadu_ps(mask[s], y.add(o[i] * self.oh * self.ow + y_at[s]))
-                    }),
-                });
+            }
+            for o0 in (0..self.c_out).step_by(OB) {
+                let o: [usize; OB] = std::array::from_fn(|i| (o0 + i).min(self.c_out - 1));
+                // Plain loops, not `array::from_fn` closures: a closure does not inherit this
+                // function's target features, and where one was not inlined its intrinsics became
+                // a call per tile.
+                let mut acc = [[_mm512_setzero_ps(); S]; OB];
+                for i in 0..OB {
+                    for s in 0..S {
+                        acc[i][s] = match bias {
+                            Some(b) => _mm512_set1_ps(b[o[i]]),
+                            None => unsafe {
+                                _mm512_maskz_loadu_ps(mask[s], y.add(o[i] * self.oh * self.ow + y_at[s]))
+                            },
+                        };
+                    }
+                }
                 for c in 0..self.c_in {
                     for ki in 0..k {
                         for kj in 0..k {
                             let off = c * plane + ki * d * wp + kj * d;
                             let tap = (c * k + ki) * k + kj;
                             // S loads, then one broadcast at a time: OB·S + S + 1 ≤ 32 zmm, no spills.
-                            let xv: [__m512; S] =
-                                std::array::from_fn(|s| unsafe { _mm512_loadu_ps(x.add(x_at[s] + off)) });
+                            let mut xv = [_mm512_setzero_ps(); S];
+                            for s in 0..S {
+                                xv[s] = unsafe { _mm512_loadu_ps(x.add(x_at[s] + off)) };
+                            }
                             for i in 0..OB {
                                 let wv = _mm512_set1_ps(weight[o[i] * taps + tap]);
                                 for s in 0..S {
@@ -229,9 +249,12 @@ impl Plan {
                             for v in 0..vpr {
                                 let live = (self.ow - v * LANES).min(LANES);
                                 let m = ((1u32 << live) - 1) as __mmask16;
-                                let xv: [__m512; KB] = std::array::from_fn(|s| unsafe {
-                                    _mm512_maskz_loadu_ps(m, x.add(x_row + v * LANES + kj[s] * d))
-                                });
+                                let mut xv = [_mm512_setzero_ps(); KB];
+                                for s in 0..KB {
+                                    xv[s] = unsafe {
+                                        _mm512_maskz_loadu_ps(m, x.add(x_row + v * LANES + kj[s] * d))
+                                    };
+                                }
                                 for i in 0..OB {
                                     let at = o[i] * pixels + oy * self.ow + v * LANES;
                                     let g = unsafe { _mm512_maskz_loadu_ps(m, dy.add(at)) };

@@ -112,7 +112,7 @@ impl MapEncoder {
         let map_len = maps.len() / n.max(1);
         let a = acts;
         for i in 0..n {
-            zeroed(&mut a.grad_a, small); // d conv2
+            sized(&mut a.grad_a, small); // d conv2 (written by the norm)
             let (stats2, stats1) =
                 (&a.stats2[i * h * h * 2..][..h * h * 2], &a.stats1[i * s * s * 2..][..s * s * 2]);
             let conv2 = &a.conv2[i * small..][..small];
@@ -124,7 +124,7 @@ impl MapEncoder {
             self.convs2.backward(p, pooled_i, 1, (h, h), &a.grad_a, grads, dpooled, &mut a.scratch);
             zeroed(&mut a.grad_c, big); // d norm1 (after ReLU)
             POOL.backward(&a.grad_b, &a.argmax[i * pooled..][..pooled], c1, s, s, &mut a.grad_c);
-            zeroed(&mut a.grad_a, big); // d conv1
+            sized(&mut a.grad_a, big); // d conv1 (written by the norm)
             let conv1 = &a.conv1[i * big..][..big];
             self.norm1.backward(p, conv1, stats1, &a.grad_c, 1, s * s, grads, &mut a.grad_a);
             let map = &maps[i * map_len..][..map_len];

@@ -16,6 +16,7 @@ mod saved;
 mod spatial_transformer;
 mod stage;
 mod train_step;
+mod widen;
 
 pub use batch::{MAP_ENCODER_CHUNK, PARTICLE_CHUNK, Workspaces};
 pub use config::{ConvBranch, PfNetConfig};

@@ -90,13 +90,13 @@ impl ObsEncoder {
         let (s, h, q) = (self.side, self.side / 2, self.side / 4);
         let (c1, c2) = (self.convs1.channels, self.convs2.channels);
         let a = acts;
-        zeroed(&mut a.grad_a, n * c2 * q * q); // d pooled2
+        sized(&mut a.grad_a, n * c2 * q * q); // d pooled2 (written by the norm)
         self.norm2.backward(p, &a.pooled2, &a.stats2, dfeatures, n, q * q, grads, &mut a.grad_a);
         zeroed(&mut a.grad_b, n * c2 * h * h); // d conv2
         POOL.backward(&a.grad_a, &a.argmax2, n * c2, h, h, &mut a.grad_b);
         zeroed(&mut a.grad_a, n * c1 * h * h); // d norm1 (after ReLU)
         self.convs2.backward(p, &a.norm1, n, (h, h), &a.grad_b, grads, Some(&mut a.grad_a), &mut a.scratch);
-        zeroed(&mut a.grad_b, n * c1 * h * h); // d pooled1
+        sized(&mut a.grad_b, n * c1 * h * h); // d pooled1 (written by the norm)
         self.norm1.backward(p, &a.pooled1, &a.stats1, &a.grad_a, n, h * h, grads, &mut a.grad_b);
         zeroed(&mut a.grad_a, n * c1 * s * s); // d conv1
         POOL.backward(&a.grad_b, &a.argmax1, n * c1, s, s, &mut a.grad_a);

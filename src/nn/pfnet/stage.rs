@@ -111,7 +111,7 @@ impl NormRelu {
     }
 
     /// From the gradient at the ReLU's output `dy` to the gradient at the norm's input `x`,
-    /// accumulated into `dx`; the ReLU's mask is recomputed, so the output need not be kept
+    /// written into `dx`; the ReLU's mask is recomputed, so the output need not be kept
     /// (one fused pass, see `LayerNorm::backward_relu`).
     #[allow(clippy::too_many_arguments)] // the layer contract: inputs, output grad, param grads, input grad
     pub fn backward(
