@@ -215,6 +215,47 @@ fn train_pfnet_through_cached_features_keeps_the_map_encoder_frozen() {
     }
 }
 
+/// A grid checkpoint starts a grid + depth run: every weight it has carries over (the depth
+/// channel's start at zero), and one step trains the depth channel too; the reverse is refused,
+/// naming `init`.
+#[test]
+fn train_pfnet_grid_checkpoint_starts_a_grid_and_depth_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let grid = PfNet::new(PfNetConfig::compact(), 4).unwrap();
+    let grid_path = dir.path().join("grid.safetensors");
+    grid.save(&grid_path).unwrap();
+    let config = TrainPfNetConfig {
+        observation: Observation::GridAndDepth,
+        init: Some(grid_path.display().to_string()),
+        ..tiny()
+    };
+    let mut state = TrainState::new(&config).unwrap();
+    assert_eq!(state.model.config.observation, Observation::GridAndDepth);
+    let depth_kernels = |model: &PfNet| -> Vec<f32> {
+        let id = model.params.find("o_c3/kernel").expect("the observation encoder's first 3×3 conv");
+        let taps = 9;
+        (model.params.get(id).chunks_exact(taps).skip(1).step_by(2)).flatten().copied().collect()
+    };
+    assert!(depth_kernels(&state.model).iter().all(|&w| w == 0.0), "depth weights start at zero");
+    for (id, spec) in grid.params.specs().filter(|(_, s)| !s.name.starts_with("o_c")) {
+        let widened = state.model.params.find(&spec.name).unwrap();
+        assert_eq!(grid.params.get(id), state.model.params.get(widened), "{} carries over", spec.name);
+    }
+
+    let [train, _] = simulate_data(&config, |_, _| {}).unwrap();
+    let pool = Workspaces::for_current_pool();
+    let (mut buffers, mut grads) = (BatchBuffers::default(), GradBuffers::default());
+    let loss = state.train_step(&config, (&train, &[]), &mut buffers, &mut grads, &pool);
+    assert!(loss.is_finite());
+    assert!(depth_kernels(&state.model).iter().any(|&w| w != 0.0), "the depth channel learns");
+
+    let both_path = dir.path().join("both.safetensors");
+    state.model.save(&both_path).unwrap();
+    let back = TrainPfNetConfig { init: Some(both_path.display().to_string()), ..tiny() };
+    let e = TrainState::new(&back).err().expect("a grid + depth checkpoint cannot start a grid run");
+    assert!(format!("{e:#}").starts_with("init:"), "{e:#}");
+}
+
 #[test]
 fn collect_is_deterministic_resumable_and_loads_back() {
     use apfn::train::collect::{CollectConfig, Manifest, collect, load_collection};
