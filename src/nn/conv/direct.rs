@@ -141,30 +141,29 @@ impl Plan {
         let vpr = self.vectors_per_row();
         let slots = self.oh * vpr;
         let (x, y) = (xpad.as_ptr(), y_n.as_mut_ptr());
-        // Slot t is vector v of output row oy, walked rather than divided out of t; each slot tile
-        // is set up once for all channel tiles, which then reread only the (L1-resident) weights.
-        let (mut oy, mut v) = (0, 0);
-        let mut x_at = [0usize; S];
-        let mut y_at = [0usize; S];
-        let mut mask = [0 as __mmask16; S];
-        for t0 in (0..slots).step_by(S) {
-            for s in 0..S {
-                if t0 + s < slots {
-                    x_at[s] = oy * wp + v * LANES;
-                    y_at[s] = oy * self.ow + v * LANES;
-                    let live = (self.ow - v * LANES).min(LANES);
-                    mask[s] = ((1u32 << live) - 1) as __mmask16;
-                    v += 1;
-                    if v == vpr {
-                        (oy, v) = (oy + 1, 0);
+        for o0 in (0..self.c_out).step_by(OB) {
+            let o: [usize; OB] = std::array::from_fn(|i| (o0 + i).min(self.c_out - 1));
+            // Slot t is vector v of output row oy, walked rather than divided out of t.
+            let (mut oy, mut v) = (0, 0);
+            let mut x_at = [0usize; S];
+            let mut y_at = [0usize; S];
+            let mut mask = [0 as __mmask16; S];
+            for t0 in (0..slots).step_by(S) {
+                for s in 0..S {
+                    if t0 + s < slots {
+                        x_at[s] = oy * wp + v * LANES;
+                        y_at[s] = oy * self.ow + v * LANES;
+                        let live = (self.ow - v * LANES).min(LANES);
+                        mask[s] = ((1u32 << live) - 1) as __mmask16;
+                        v += 1;
+                        if v == vpr {
+                            (oy, v) = (oy + 1, 0);
+                        }
+                    } else {
+                        // Past the last slot: repeat it (same values written twice).
+                        (x_at[s], y_at[s], mask[s]) = (x_at[s - 1], y_at[s - 1], mask[s - 1]);
                     }
-                } else {
-                    // Past the last slot: repeat it (same values written twice).
-                    (x_at[s], y_at[s], mask[s]) = (x_at[s - 1], y_at[s - 1], mask[s - 1]);
                 }
-            }
-            for o0 in (0..self.c_out).step_by(OB) {
-                let o: [usize; OB] = std::array::from_fn(|i| (o0 + i).min(self.c_out - 1));
                 // Plain loops, not `array::from_fn` closures: a closure does not inherit this
                 // function's target features, and where one was not inlined its intrinsics became
                 // a call per tile.
