@@ -175,15 +175,20 @@ fn train_pfnet_resume_writes_the_same_checkpoint_bytes() {
     assert!(same, "a resumed run must write the same checkpoint bytes as an uninterrupted one");
 }
 
+/// `model` saved as `dir/name.safetensors`, its path as an `init` takes it.
+fn saved(model: &PfNet, dir: &std::path::Path, name: &str) -> String {
+    let path = dir.join(format!("{name}.safetensors"));
+    model.save(&path).unwrap();
+    path.display().to_string()
+}
+
 #[test]
 fn train_pfnet_through_cached_features_keeps_the_map_encoder_frozen() {
     let dir = tempfile::tempdir().unwrap();
     let init = PfNet::new(PfNetConfig::compact(), 9).unwrap();
-    let init_path = dir.path().join("init.safetensors");
-    init.save(&init_path).unwrap();
     let config = TrainPfNetConfig {
         features: MapFeatures::Cached,
-        init: Some(init_path.display().to_string()),
+        init: Some(saved(&init, dir.path(), "init")),
         cache: FeatureCacheSpec { orientations: 8, ..Default::default() },
         ..tiny()
     };
@@ -222,11 +227,9 @@ fn train_pfnet_through_cached_features_keeps_the_map_encoder_frozen() {
 fn train_pfnet_grid_checkpoint_starts_a_grid_and_depth_run() {
     let dir = tempfile::tempdir().unwrap();
     let grid = PfNet::new(PfNetConfig::compact(), 4).unwrap();
-    let grid_path = dir.path().join("grid.safetensors");
-    grid.save(&grid_path).unwrap();
     let config = TrainPfNetConfig {
         observation: Observation::GridAndDepth,
-        init: Some(grid_path.display().to_string()),
+        init: Some(saved(&grid, dir.path(), "grid")),
         ..tiny()
     };
     let mut state = TrainState::new(&config).unwrap();
@@ -249,9 +252,7 @@ fn train_pfnet_grid_checkpoint_starts_a_grid_and_depth_run() {
     assert!(loss.is_finite());
     assert!(depth_kernels(&state.model).iter().any(|&w| w != 0.0), "the depth channel learns");
 
-    let both_path = dir.path().join("both.safetensors");
-    state.model.save(&both_path).unwrap();
-    let back = TrainPfNetConfig { init: Some(both_path.display().to_string()), ..tiny() };
+    let back = TrainPfNetConfig { init: Some(saved(&state.model, dir.path(), "both")), ..tiny() };
     let e = TrainState::new(&back).err().expect("a grid + depth checkpoint cannot start a grid run");
     assert!(format!("{e:#}").starts_with("init:"), "{e:#}");
 }
