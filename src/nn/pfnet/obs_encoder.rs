@@ -5,7 +5,7 @@
 //! → 14×14×16 → LayerNorm → ReLU → 14×14×16.
 
 use super::config::PfNetConfig;
-use super::stage::{Branches, NormRelu, sized, zeroed};
+use super::stage::{Branches, NormRelu, PooledScratch, sized, zeroed};
 use crate::nn::conv::Padding;
 use crate::nn::params::Params;
 use crate::nn::pool::MaxPool2d;
@@ -22,10 +22,11 @@ pub struct ObsEncoder {
     norm2: NormRelu,
 }
 
-/// Everything the forward pass keeps for the backward, for a chunk of observations.
+/// Everything the forward pass keeps for the backward, for a chunk of observations. The first
+/// stage's convolutions are pooled as they come out (`Branches::forward_pooled`), so only the
+/// pooled values and their argmax are kept.
 #[derive(Clone, Debug, Default)]
 pub struct ObsActivations {
-    conv1: Vec<f32>,
     pooled1: Vec<f32>,
     argmax1: Vec<u8>,
     norm1: Vec<f32>,
@@ -38,6 +39,7 @@ pub struct ObsActivations {
     pub features: Vec<f32>,
     grad_a: Vec<f32>,
     grad_b: Vec<f32>,
+    stage1: PooledScratch,
     scratch: Vec<f32>,
 }
 
@@ -59,11 +61,10 @@ impl ObsEncoder {
     pub fn forward(&self, p: &Params, obs: &[f32], n: usize, acts: &mut ObsActivations) {
         let (s, h, q) = (self.side, self.side / 2, self.side / 4);
         let (c1, c2) = (self.convs1.channels, self.convs2.channels);
-        sized(&mut acts.conv1, n * c1 * s * s);
-        self.convs1.forward(p, obs, n, (s, s), &mut acts.conv1, &mut acts.scratch);
         sized(&mut acts.pooled1, n * c1 * h * h);
         acts.argmax1.resize(n * c1 * h * h, 0);
-        POOL.forward(&acts.conv1, n * c1, s, s, &mut acts.pooled1, &mut acts.argmax1);
+        let pooled1 = (&mut acts.pooled1[..], &mut acts.argmax1[..]);
+        self.convs1.forward_pooled(p, obs, n, (s, s), &POOL, pooled1, &mut acts.stage1);
         sized(&mut acts.norm1, n * c1 * h * h);
         sized(&mut acts.stats1, n * h * h * 2);
         self.norm1.forward(p, &acts.pooled1, n, h * h, &mut acts.norm1, &mut acts.stats1);
@@ -98,8 +99,7 @@ impl ObsEncoder {
         self.convs2.backward(p, &a.norm1, n, (h, h), &a.grad_b, grads, Some(&mut a.grad_a), &mut a.scratch);
         sized(&mut a.grad_b, n * c1 * h * h); // d pooled1 (written by the norm)
         self.norm1.backward(p, &a.pooled1, &a.stats1, &a.grad_a, n, h * h, grads, &mut a.grad_b);
-        zeroed(&mut a.grad_a, n * c1 * s * s); // d conv1
-        POOL.backward(&a.grad_b, &a.argmax1, n * c1, s, s, &mut a.grad_a);
-        self.convs1.backward(p, obs, n, (s, s), &a.grad_a, grads, None, &mut a.scratch);
+        let dpooled1 = (&a.grad_b[..], &a.argmax1[..]);
+        self.convs1.backward_pooled(p, obs, n, (s, s), &POOL, dpooled1, grads, &mut a.stage1);
     }
 }

@@ -6,7 +6,9 @@ use crate::nn::activation::relu_forward;
 use crate::nn::conv::{Conv2d, Padding};
 use crate::nn::layer_norm::LayerNorm;
 use crate::nn::params::{ParamId, Params};
+use crate::nn::pool::MaxPool2d;
 use rand::Rng;
+use std::ops::Range;
 
 /// Parallel 'same' convolutions over one input, each writing its own channel slice of one output.
 #[derive(Clone, Debug)]
@@ -87,6 +89,88 @@ impl Branches {
     }
 }
 
+/// One image's branch output between a convolution and its max-pool: the buffer
+/// [`Branches::forward_pooled`] and [`Branches::backward_pooled`] reuse for every image and branch.
+#[derive(Clone, Debug, Default)]
+pub struct PooledScratch {
+    conv: Vec<f32>,
+    conv_scratch: Vec<f32>,
+}
+
+impl Branches {
+    /// The branches, each followed by `pool` over its channels: x [n][c_in][h][w] → pooled
+    /// [n][channels][oh][ow] and its argmax, without keeping the convolutions' output. One
+    /// image's branch (≤ 128 × 56 × 56 floats in the observation encoder, 1.6 MB) stays in L2
+    /// from the convolution to the pool, where the whole stage's output (4.8 MB per observation)
+    /// would be written to memory, read back by the pool, and zeroed again for the backward.
+    #[allow(clippy::too_many_arguments)] // inputs, the pool, its two outputs, scratch
+    pub fn forward_pooled(
+        &self,
+        p: &Params,
+        x: &[f32],
+        n: usize,
+        (h, w): (usize, usize),
+        pool: &MaxPool2d,
+        (pooled, argmax): (&mut [f32], &mut [u8]),
+        scratch: &mut PooledScratch,
+    ) {
+        let (oh, ow) = pool.output_size(h, w);
+        for ((conv, weight, bias), image, out) in self.image_branches(x.len(), n, oh * ow) {
+            let c = conv.c_out;
+            sized(&mut scratch.conv, c * h * w);
+            let (weight, bias, y) = (p.get(*weight), p.get(*bias), &mut scratch.conv[..]);
+            conv.forward(weight, bias, &x[image], 1, h, w, y, c, 0, &mut scratch.conv_scratch);
+            pool.forward(y, c, h, w, &mut pooled[out.clone()], &mut argmax[out]);
+        }
+    }
+
+    /// The backward of [`Branches::forward_pooled`] from d loss / d pooled: per image and branch,
+    /// the pool's backward into the reused branch buffer, then the branch's weight gradients
+    /// (accumulated into `grads`). The inputs get no gradient (the first stage reads the data).
+    #[allow(clippy::too_many_arguments)] // the layer contract: inputs, the pool, output grad, param grads
+    pub fn backward_pooled(
+        &self,
+        p: &Params,
+        x: &[f32],
+        n: usize,
+        (h, w): (usize, usize),
+        pool: &MaxPool2d,
+        (dpooled, argmax): (&[f32], &[u8]),
+        grads: &mut [f32],
+        scratch: &mut PooledScratch,
+    ) {
+        let (oh, ow) = pool.output_size(h, w);
+        for ((conv, weight, bias), image, out) in self.image_branches(x.len(), n, oh * ow) {
+            let c = conv.c_out;
+            zeroed(&mut scratch.conv, c * h * w);
+            pool.backward(&dpooled[out.clone()], &argmax[out], c, h, w, &mut scratch.conv);
+            let (dw, db) = p.pair_mut(grads, *weight, *bias);
+            let (dy, conv_scratch) = (&scratch.conv, &mut scratch.conv_scratch);
+            conv.backward(p.get(*weight), &x[image], 1, h, w, dy, c, 0, dw, db, None, conv_scratch);
+        }
+    }
+
+    /// Every (image, branch) pair of `n` images stored in `x_len` floats: the branch, the image's
+    /// range in the input, and the branch's channels of that image in a pooled output
+    /// [n][channels][plane].
+    fn image_branches(
+        &self,
+        x_len: usize,
+        n: usize,
+        plane: usize,
+    ) -> impl Iterator<Item = (&(Conv2d, ParamId, ParamId), Range<usize>, Range<usize>)> {
+        let image_len = x_len / n.max(1);
+        (0..n).flat_map(move |i| {
+            let image = i * image_len..(i + 1) * image_len;
+            self.convs.iter().scan(i * self.channels * plane, move |at, branch| {
+                let out = *at..*at + branch.0.c_out * plane;
+                *at = out.end;
+                Some((branch, image.clone(), out))
+            })
+        })
+    }
+}
+
 /// LayerNorm over the channels of each pixel, then ReLU, as every PF-net stage ends.
 #[derive(Clone, Debug)]
 pub struct NormRelu {
@@ -140,4 +224,66 @@ pub fn zeroed(buf: &mut Vec<f32>, len: usize) {
 /// Resizes `buf` to `len` without clearing what a forward pass will overwrite anyway.
 pub fn sized(buf: &mut Vec<f32>, len: usize) {
     buf.resize(len, 0.0);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::rng::stream;
+    use rand::Rng;
+
+    const POOL: MaxPool2d = MaxPool2d { kernel: 3, stride: 2, padding: Padding::Same };
+
+    #[test]
+    fn pooled_branches_match_the_convolutions_then_the_pool() {
+        let mut rng = stream(&[5]);
+        let mut params = Params::new();
+        let stage = [
+            ConvBranch { filters: 3, kernel: 3, dilation: 1 },
+            ConvBranch { filters: 2, kernel: 5, dilation: 2 },
+        ];
+        let branches = Branches::new(&mut params, "t", 2, &stage, &mut rng);
+        for (name, value) in [("t_c3/bias", 0.3), ("t_c5d2/bias", -0.2)] {
+            let id = params.find(name).expect("branch bias"); // biases count in the forward
+            params.fill(id, value);
+        }
+        let (n, side, c) = (2, 10, branches.channels);
+        let x: Vec<f32> = (0..n * 2 * side * side).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let pooled_len = n * c * (side / 2) * (side / 2);
+        let dpooled: Vec<f32> = (0..pooled_len).map(|_| rng.random_range(-1.0..1.0)).collect();
+
+        // Unfused: every branch into the whole stage's output, the pool over it, and back.
+        let mut conv = vec![0.0; n * c * side * side];
+        let mut scratch = Vec::new();
+        branches.forward(&params, &x, n, (side, side), &mut conv, &mut scratch);
+        let (mut pooled, mut argmax) = (vec![0.0; pooled_len], vec![0u8; pooled_len]);
+        POOL.forward(&conv, n * c, side, side, &mut pooled, &mut argmax);
+        let mut dconv = vec![0.0; conv.len()];
+        POOL.backward(&dpooled, &argmax, n * c, side, side, &mut dconv);
+        let mut grads = vec![0.0; params.len()];
+        branches.backward(&params, &x, n, (side, side), &dconv, &mut grads, None, &mut scratch);
+
+        let (mut fused, mut fused_argmax) = (vec![0.0; pooled_len], vec![0u8; pooled_len]);
+        let mut pooled_scratch = PooledScratch::default();
+        let outputs = (&mut fused[..], &mut fused_argmax[..]);
+        branches.forward_pooled(&params, &x, n, (side, side), &POOL, outputs, &mut pooled_scratch);
+        assert_eq!(fused, pooled, "the fused forward computes the same pooled values");
+        assert_eq!(fused_argmax, argmax);
+        let mut fused_grads = vec![0.0; params.len()];
+        let dy = (&dpooled[..], &argmax[..]);
+        branches.backward_pooled(
+            &params,
+            &x,
+            n,
+            (side, side),
+            &POOL,
+            dy,
+            &mut fused_grads,
+            &mut pooled_scratch,
+        );
+        for (k, (a, b)) in fused_grads.iter().zip(&grads).enumerate() {
+            assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "gradient {k}: fused {a}, unfused {b}");
+        }
+        assert!(grads.iter().any(|&g| g != 0.0), "the test must exercise the gradients");
+    }
 }
