@@ -219,27 +219,38 @@ impl Conv2d {
         return false;
     }
 
+    /// `weight` [c_out][c_in][k][k] as `forward_channel_last` reads it, [c_in·k·k][c_out]: laid out
+    /// once per pass, not once per call, where a caller walks its samples in small groups.
+    pub fn channel_last_weight(&self, weight: &[f32], wt: &mut Vec<f32>) {
+        assert!(self.runs_channel_last(false), "{self:?} has no channel-last path on this CPU");
+        assert_eq!(weight.len(), self.weight_len(), "weight length");
+        wt.resize(self.weight_len(), 0.0);
+        #[cfg(target_arch = "x86_64")]
+        transpose::transpose(weight, self.c_out, self.taps(), wt, false);
+    }
+
     /// `forward` for chains of strided convs (SAC's encoders) that keep their activations
     /// channel-last, so no layer transposes its output: x is [n][c_in][h][w], or [n][h][w][c_in]
-    /// if `x_channel_last`; writes y [n][oh][ow][c_out]. Only where `runs_channel_last(false)`.
+    /// if `x_channel_last`; writes y [n][oh][ow][c_out], through a ReLU if `relu`. `wt` is the
+    /// weight from `channel_last_weight`. Only where `runs_channel_last(false)`.
     #[allow(clippy::too_many_arguments)]
     pub fn forward_channel_last(
         &self,
-        weight: &[f32],
+        wt: &[f32],
         bias: &[f32],
         x: &[f32],
         x_channel_last: bool,
         n: usize,
         (h, w): (usize, usize),
         y: &mut [f32],
-        scratch: &mut Vec<f32>,
+        relu: bool,
     ) {
         assert!(self.runs_channel_last(false), "{self:?} has no channel-last path on this CPU");
         let g = self.geometry(h, w);
-        self.check_shapes(weight, x, n, &g, y.len(), (self.c_out, 0));
+        self.check_shapes(wt, x, n, &g, y.len(), (self.c_out, 0));
         assert_eq!(bias.len(), self.c_out, "bias length");
         #[cfg(target_arch = "x86_64")]
-        self.forward_strided_channel_last(&g, weight, bias, x, x_channel_last, n, y, scratch);
+        self.forward_strided_channel_last(&g, wt, bias, x, x_channel_last, n, y, relu);
     }
 
     /// `backward` of `forward_channel_last`: dy is [n][oh][ow][c_out]; accumulates (+=) into
@@ -843,8 +854,9 @@ mod tests {
 
             let x_in = if x_last { to_last(&x, n, c.c_in, hw) } else { x.clone() };
             let dy_last = to_last(&dy, n, c.c_out, oh * ow);
-            let mut y_last = vec![f32::NAN; y.len()];
-            c.forward_channel_last(&wt, &b, &x_in, x_last, n, (side, side), &mut y_last, &mut scratch);
+            let (mut y_last, mut w_last) = (vec![f32::NAN; y.len()], Vec::new());
+            c.channel_last_weight(&wt, &mut w_last);
+            c.forward_channel_last(&w_last, &b, &x_in, x_last, n, (side, side), &mut y_last, false);
             let (mut dw_l, mut db_l, mut dx_l) =
                 (vec![0.0; wt.len()], vec![0.0; b.len()], vec![0.0; x.len()]);
             let dx_last = x_last.then_some(&mut dx_l[..]);

@@ -16,8 +16,8 @@
 //! are to a next layer that reads its x channel-last (`Plan::channel_last`).
 
 use std::arch::x86_64::{
-    __m512, _mm512_add_ps, _mm512_fmadd_ps, _mm512_loadu_ps, _mm512_set1_ps, _mm512_setzero_ps,
-    _mm512_storeu_ps,
+    __m512, _mm512_add_ps, _mm512_fmadd_ps, _mm512_loadu_ps, _mm512_max_ps, _mm512_set1_ps,
+    _mm512_setzero_ps, _mm512_storeu_ps,
 };
 
 use super::transpose::transpose;
@@ -55,11 +55,13 @@ impl Plan {
     }
 
     /// Steps in x between neighbouring channels and between neighbouring pixels.
+    #[inline(always)]
     fn x_strides(&self) -> (usize, usize) {
         if self.channel_last { (1, self.c_in) } else { (self.h * self.w, 1) }
     }
 
     /// Offset in x_n of tap `(c, ki, kj)` (index `(c·k + ki)·k + kj`) from its output pixel's origin.
+    #[inline(always)]
     fn tap_offset(&self, tap: usize) -> usize {
         let (k, d) = (self.kernel, self.dilation);
         let (c, ki, kj) = (tap / (k * k), tap / k % k, tap % k);
@@ -70,6 +72,7 @@ impl Plan {
     /// (sample, oy, ox) of the call's output pixels q0, q0 + 1, … (`q = i·P + oy·ow + ox`), the
     /// tail past `total` clamped to the last pixel. Counted up from q0, not divided out per pixel:
     /// a first layer's tile does only 9 taps of arithmetic per pixel.
+    #[inline(always)]
     fn pixel_coords<const PX: usize>(&self, q0: usize, total: usize) -> [(usize, usize, usize); PX] {
         let (mut i, r) = (q0 / self.pixels(), q0 % self.pixels());
         let (mut oy, mut ox) = (r / self.ow, r % self.ow);
@@ -89,11 +92,13 @@ impl Plan {
     }
 
     /// Input pixel (of the whole call, `[n][h][w]`) of the top-left tap of output pixel (i, oy, ox).
+    #[inline(always)]
     fn origin_pixel(&self, (i, oy, ox): (usize, usize, usize)) -> usize {
         (i * self.h + oy * self.stride) * self.w + ox * self.stride
     }
 
     /// Offset in x of the top-left tap of output pixel (i, oy, ox).
+    #[inline(always)]
     fn origin(&self, (i, oy, ox): (usize, usize, usize)) -> usize {
         i * self.x_len() + (oy * self.w + ox) * self.stride * self.x_strides().1
     }
@@ -110,8 +115,8 @@ impl Plan {
     }
 
     /// yt [n·P][c_out] ← bias[o] + Σ_taps wt[tap][o] · x[i][tap at pixel], for the `n` samples of
-    /// x [n][c_in][h][w]; wt is [c_in·k·k][c_out].
-    pub fn forward(&self, wt: &[f32], bias: &[f32], x: &[f32], n: usize, yt: &mut [f32]) {
+    /// x [n][c_in][h][w]; wt is [c_in·k·k][c_out]. With `relu`, negative sums are stored as 0.
+    pub fn forward(&self, wt: &[f32], bias: &[f32], x: &[f32], n: usize, yt: &mut [f32], relu: bool) {
         self.check(n, self.c_out);
         assert_eq!((wt.len(), bias.len(), x.len()), (self.taps() * self.c_out, self.c_out, n * self.x_len()));
         assert_eq!(yt.len(), n * self.pixels() * self.c_out, "yt length");
@@ -120,20 +125,22 @@ impl Plan {
         // a pixel's row of yt.
         unsafe {
             // Register tiles of 64 channels × 6 pixels, 32 × 12 or 16 × 24: OB·PX + OB + 1 ≤ 32 zmm.
-            if self.c_out.is_multiple_of(4 * LANES) {
-                self.forward_tiles::<4, 6>(wt, bias, x, n, yt);
-            } else if self.c_out.is_multiple_of(2 * LANES) {
-                self.forward_tiles::<2, 12>(wt, bias, x, n, yt);
-            } else {
-                self.forward_tiles::<1, 24>(wt, bias, x, n, yt);
+            match (self.c_out % (4 * LANES), self.c_out % (2 * LANES), relu) {
+                (0, _, false) => self.forward_tiles::<4, 6, false>(wt, bias, x, n, yt),
+                (0, _, true) => self.forward_tiles::<4, 6, true>(wt, bias, x, n, yt),
+                (_, 0, false) => self.forward_tiles::<2, 12, false>(wt, bias, x, n, yt),
+                (_, 0, true) => self.forward_tiles::<2, 12, true>(wt, bias, x, n, yt),
+                (_, _, false) => self.forward_tiles::<1, 24, false>(wt, bias, x, n, yt),
+                (_, _, true) => self.forward_tiles::<1, 24, true>(wt, bias, x, n, yt),
             }
         }
     }
 
     /// A tile of OB·16 channels × PX pixels: per tap, OB weight vectors times PX broadcast inputs.
-    /// The pixel tail clamps to the last pixel, recomputing it rather than branching.
+    /// The pixel tail clamps to the last pixel, recomputing it rather than branching. RELU clamps
+    /// the sums as they are stored, sparing the activation its own pass over y.
     #[target_feature(enable = "avx512f")]
-    fn forward_tiles<const OB: usize, const PX: usize>(
+    fn forward_tiles<const OB: usize, const PX: usize, const RELU: bool>(
         &self,
         wt: &[f32],
         bias: &[f32],
@@ -171,6 +178,8 @@ impl Plan {
                 }
                 for (b, pixels) in acc.iter().enumerate().take(ob) {
                     for (j, &sum) in pixels.iter().enumerate().take(total - q0) {
+                        // max(0, NaN) is NaN (the second operand wins), as in `relu_forward`.
+                        let sum = if RELU { _mm512_max_ps(_mm512_setzero_ps(), sum) } else { sum };
                         unsafe {
                             _mm512_storeu_ps(yt.as_mut_ptr().add((q0 + j) * self.c_out + block[b]), sum)
                         };
@@ -268,7 +277,10 @@ impl Plan {
         );
         // SAFETY: `check` and the lengths above: dy reads stay in sample i's channel slice, wx and dxt
         // are read and written in whole 16-channel blocks of rows inside them.
-        unsafe { self.input_tiles::<3, 9>(wx, dy, n, (y_channels, y_offset), dxt) }
+        // 9 pixels × 3 kernel positions: each weight vector, streamed from L2, serves 9 pixels
+        // (3 pixels × all 9 positions streamed the weights three times as often; this kernel's
+        // share of a paper-size update fell by 28 % in `perf`).
+        unsafe { self.input_tiles::<9, 3>(wx, dy, n, (y_channels, y_offset), dxt) }
     }
 
     /// A tile of 16 input channels × PX output pixels × TB kernel positions: per output channel,
@@ -358,20 +370,18 @@ impl Conv2d {
     pub(super) fn forward_strided_channel_last(
         &self,
         g: &Geometry,
-        weight: &[f32],
+        wt: &[f32],
         bias: &[f32],
         x: &[f32],
         x_channel_last: bool,
         n: usize,
         y: &mut [f32],
-        scratch: &mut Vec<f32>,
+        relu: bool,
     ) {
         if n * g.pixels() == 0 {
             return;
         }
-        let [wt] = carve(scratch, [self.weight_len()]);
-        transpose(weight, self.c_out, self.taps(), wt, false);
-        self.strided_plan(g, x_channel_last).forward(wt, bias, x, n, y);
+        self.strided_plan(g, x_channel_last).forward(wt, bias, x, n, y, relu);
     }
 
     /// `backward_channel_last` here, per group of samples (so x and dy stay in cache across the
@@ -448,7 +458,7 @@ impl Conv2d {
         for (x_g, y_g) in x.chunks(group * x_len).zip(y.chunks_mut(group * y_channels * p)) {
             let m = x_g.len() / x_len;
             let yt = &mut yt[..m * p * self.c_out];
-            plan.forward(wt, bias, x_g, m, yt);
+            plan.forward(wt, bias, x_g, m, yt, false);
             for (yt_n, y_n) in yt.chunks_exact(p * self.c_out).zip(y_g.chunks_exact_mut(y_channels * p)) {
                 transpose(yt_n, p, self.c_out, &mut y_n[y_offset * p..][..self.c_out * p], false);
             }

@@ -232,7 +232,7 @@ impl Joint {
         dense.backward(p.get(*w), &a.pooled, n, dloglik, dw, db, Some(&mut a.grad_pooled));
         zeroed(&mut a.grad_relu, n * channels * o * o);
         POOL.backward(&a.grad_pooled, &a.argmax, n * channels, o, o, &mut a.grad_relu);
-        zeroed(&mut a.grad_local, n * channels * o * o);
+        a.grad_local.resize(n * channels * o * o, 0.0);
         relu_backward(&a.local, &a.grad_relu, &mut a.grad_local);
         zeroed(&mut a.dinput, n * self.input_len());
         for (offset, (layer, w, b)) in self.layers() {

@@ -14,12 +14,24 @@ use crate::nn::params::Params;
 use crate::nn::sac::layer::WeightBias;
 use crate::nn::sac::zeroed;
 
+/// Samples taken through every convolution together on the channel-last path: their first layer
+/// outputs (≤ 93 KB each for the paper's 56 × 56 grid) stay in a core's L2 for the second.
+const LAYER_GROUP: usize = 8;
+
 #[derive(Clone, Debug, PartialEq)]
 struct ConvLayer {
     conv: Conv2d,
     /// Input height = width of this layer.
     side: usize,
     wb: WeightBias,
+}
+
+impl ConvLayer {
+    /// Output values per sample.
+    fn output_len(&self) -> usize {
+        let (oh, ow) = self.conv.output_size(self.side, self.side);
+        self.conv.c_out * oh * ow
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -47,6 +59,8 @@ pub struct EncoderActivations {
     d_pre: Vec<f32>,
     d_input: Vec<f32>,
     scratch: Vec<f32>,
+    /// Every convolution's weight as the channel-last kernels read it (channel-last only).
+    weights: Vec<Vec<f32>>,
 }
 
 impl ImageEncoder {
@@ -103,20 +117,20 @@ impl ImageEncoder {
     pub fn forward(&self, values: &[f32], x: &[f32], n: usize, acts: &mut EncoderActivations) {
         assert_eq!(x.len(), n * self.input_len, "encoder input length");
         acts.conv_out.resize(self.convs.len(), Vec::new());
-        for (i, l) in self.convs.iter().enumerate() {
-            let (done, rest) = acts.conv_out.split_at_mut(i);
-            let input = if i == 0 { x } else { &done[i - 1] };
-            let (oh, ow) = l.conv.output_size(l.side, l.side);
-            let y = &mut rest[0];
-            y.resize(n * l.conv.c_out * oh * ow, 0.0);
-            let (w, b) = (l.wb.weight(values), l.wb.bias(values));
-            if self.channel_last {
-                let sides = (l.side, l.side);
-                l.conv.forward_channel_last(w, b, input, i > 0, n, sides, y, &mut acts.scratch);
-            } else {
+        for (l, y) in self.convs.iter().zip(&mut acts.conv_out) {
+            y.resize(n * l.output_len(), 0.0);
+        }
+        if self.channel_last {
+            self.convs_channel_last(values, x, n, acts);
+        } else {
+            for (i, l) in self.convs.iter().enumerate() {
+                let (done, rest) = acts.conv_out.split_at_mut(i);
+                let input = if i == 0 { x } else { &done[i - 1] };
+                let (w, b) = (l.wb.weight(values), l.wb.bias(values));
+                let y = &mut rest[0];
                 l.conv.forward(w, b, input, n, l.side, l.side, y, l.conv.c_out, 0, &mut acts.scratch);
+                relu_forward(y);
             }
-            relu_forward(y);
         }
         acts.features.resize(n * self.dense.outputs, 0.0);
         let mut last = acts.conv_out.last().expect("at least one convolution");
@@ -136,6 +150,30 @@ impl ImageEncoder {
         relu_forward(&mut acts.features);
     }
 
+    /// The convolutions channel-last, [`LAYER_GROUP`] samples at a time through every layer, so
+    /// each layer reads its input from cache, where it was just written (a whole chunk's first
+    /// layer output, 2–3 MB, overflowed L2 on its way to the second).
+    fn convs_channel_last(&self, values: &[f32], x: &[f32], n: usize, acts: &mut EncoderActivations) {
+        acts.weights.resize(self.convs.len(), Vec::new());
+        for (l, wt) in self.convs.iter().zip(&mut acts.weights) {
+            l.conv.channel_last_weight(l.wb.weight(values), wt);
+        }
+        for first in (0..n).step_by(LAYER_GROUP) {
+            let m = LAYER_GROUP.min(n - first);
+            for (i, (l, wt)) in self.convs.iter().zip(&acts.weights).enumerate() {
+                let (done, rest) = acts.conv_out.split_at_mut(i);
+                let (input, in_len) = match i {
+                    0 => (x, self.input_len),
+                    _ => (&done[i - 1][..], self.convs[i - 1].output_len()),
+                };
+                let input = &input[first * in_len..][..m * in_len];
+                let y = &mut rest[0][first * l.output_len()..][..m * l.output_len()];
+                let (b, sides) = (l.wb.bias(values), (l.side, l.side));
+                l.conv.forward_channel_last(wt, b, input, i > 0, m, sides, y, true);
+            }
+        }
+    }
+
     /// Accumulates into `grads` (laid out like the arena) the gradient of a loss whose gradient
     /// with respect to `acts.features` is `d_features`. The input image gets no gradient.
     pub fn backward(
@@ -147,8 +185,8 @@ impl ImageEncoder {
         d_features: &[f32],
         grads: &mut [f32],
     ) {
-        let EncoderActivations { conv_out, flat, features, d_pre, d_input, scratch } = acts;
-        zeroed(d_pre, features.len());
+        let EncoderActivations { conv_out, flat, features, d_pre, d_input, scratch, .. } = acts;
+        d_pre.resize(features.len(), 0.0);
         relu_backward(features, d_features, d_pre);
         let last = if self.channel_last { &flat[..] } else { conv_out.last().expect("forward ran") };
         zeroed(d_input, last.len());
@@ -157,13 +195,13 @@ impl ImageEncoder {
         if self.channel_last {
             // d(flat) channel-major → the last convolution's channel-last layout, via d_pre.
             let (p, c) = self.last_shape();
-            zeroed(d_pre, d_input.len());
+            d_pre.resize(d_input.len(), 0.0);
             transpose_samples(d_input, n, c, p, d_pre);
             std::mem::swap(d_input, d_pre);
         }
         for (i, l) in self.convs.iter().enumerate().rev() {
             // d_input holds d(post-ReLU output of layer i); through the ReLU into d_pre.
-            zeroed(d_pre, conv_out[i].len());
+            d_pre.resize(conv_out[i].len(), 0.0);
             relu_backward(&conv_out[i], d_input, d_pre);
             let input = if i == 0 { x } else { &conv_out[i - 1] };
             let (dw, db) = l.wb.split_mut(grads);
@@ -224,14 +262,15 @@ mod tests {
     }
 
     /// Channel-last activations give the channel-major features and gradients (16-channel convs
-    /// take that path on AVX-512; elsewhere both runs are channel-major).
+    /// take that path on AVX-512; elsewhere both runs are channel-major), over more samples than
+    /// one layer group, the last group short.
     #[test]
     fn channel_last_matches_channel_major() {
         let mut params = Params::new();
         let last = ImageEncoder::new(&mut params, "enc", 3, 15, &[16, 32, 16], 8);
         params.values = test_values(params.len(), 17).iter().map(|v| v * 0.3).collect();
         let major = ImageEncoder { channel_last: false, ..last.clone() };
-        let n = 3;
+        let n = LAYER_GROUP + 3;
         let x: Vec<f32> = test_values(n * last.input_len(), 18).iter().map(|v| v.abs()).collect();
         let d_features = test_values(n * 8, 19);
         let run = |enc: &ImageEncoder| {

@@ -31,8 +31,13 @@ impl WeightBias {
 
     /// The weight's and the bias's gradients, borrowed together.
     pub fn split_mut<'a>(&self, grads: &'a mut [f32]) -> (&'a mut [f32], &'a mut [f32]) {
+        self.split_mut_from(grads, 0)
+    }
+
+    /// `split_mut` of a gradient slice that starts at arena index `first` (a network's own part).
+    pub fn split_mut_from<'a>(&self, grads: &'a mut [f32], first: usize) -> (&'a mut [f32], &'a mut [f32]) {
         debug_assert_eq!(self.weight.end, self.bias.start, "bias must follow its weight");
-        grads[self.weight.start..self.bias.end].split_at_mut(self.weight.len())
+        grads[self.weight.start - first..self.bias.end - first].split_at_mut(self.weight.len())
     }
 
     /// Glorot-uniform weights (`fan_in`, `fan_out` as Keras counts them), zero bias.

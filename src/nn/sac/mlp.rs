@@ -5,6 +5,7 @@ use crate::nn::dense::Dense;
 use crate::nn::params::Params;
 use crate::nn::sac::layer::WeightBias;
 use crate::nn::sac::zeroed;
+use std::ops::Range;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Mlp {
@@ -45,6 +46,13 @@ impl Mlp {
         self.layers[0].0.inputs
     }
 
+    /// Where the MLP's tensors lie in the arena: one run, added in order by `new`.
+    pub fn params(&self) -> Range<usize> {
+        let first = &self.layers.first().expect("at least one layer").1;
+        let last = &self.layers.last().expect("at least one layer").1;
+        first.weight.start..last.bias.end
+    }
+
     pub fn init(&self, params: &mut Params, rng: &mut impl rand::Rng) {
         for (d, wb) in &self.layers {
             wb.init(params, d.inputs, d.outputs, rng);
@@ -68,8 +76,9 @@ impl Mlp {
     }
 
     /// Backpropagates `d_output` (gradient w.r.t. the last layer's output). Accumulates the
-    /// weights' gradients into `grads` when given (None: the weights are frozen) and the input's
-    /// into `dx` when given.
+    /// weights' gradients into `grads` when given (the MLP's own part of the arena's gradient,
+    /// `[self.params()]`, so networks can write theirs side by side; None: the weights are frozen)
+    /// and the input's into `dx` when given.
     #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &self,
@@ -82,6 +91,10 @@ impl Mlp {
         dx: Option<&mut [f32]>,
     ) {
         let MlpActivations { outputs, d_out, d_in } = acts;
+        let first = self.params().start;
+        if let Some(g) = grads.as_deref() {
+            assert_eq!(g.len(), self.params().len(), "grads: the MLP's own part of the gradient");
+        }
         d_out.clear();
         d_out.extend_from_slice(d_output);
         for (i, (d, wb)) in self.layers.iter().enumerate().rev() {
@@ -90,7 +103,7 @@ impl Mlp {
             let w = wb.weight(values);
             match grads.as_deref_mut() {
                 Some(g) => {
-                    let (dw, db) = wb.split_mut(g);
+                    let (dw, db) = wb.split_mut_from(g, first);
                     d.backward(w, input, n, d_out, dw, db, Some(d_in));
                 }
                 None => d.backward_input(w, n, d_out, d_in),
@@ -99,7 +112,7 @@ impl Mlp {
                 break;
             }
             // Through the ReLU of the layer below: d_out ← d_in · [y > 0].
-            zeroed(d_out, d_in.len());
+            d_out.resize(d_in.len(), 0.0);
             relu_backward(input, d_in, d_out);
         }
         if let Some(dx) = dx {
@@ -115,9 +128,11 @@ mod tests {
 
     #[test]
     fn backward_matches_finite_differences_with_and_without_weight_grads() {
+        // Another tensor first, so the MLP's gradient slice starts past the arena's start.
         let mut params = Params::new();
+        params.add("before", &[3]);
         let mlp = Mlp::new(&mut params, "mlp", &[5, 6, 4, 2]);
-        params.values = test_values(params.len(), 3);
+        params.values = [vec![0.0; 3], test_values(mlp.params().len(), 3)].concat();
         let n = 3;
         let x = test_values(n * 5, 4);
         let r = test_values(n * 2, 5);
@@ -128,12 +143,12 @@ mod tests {
         };
         let mut acts = MlpActivations::default();
         mlp.forward(&params.values, &x, n, &mut acts);
-        let (mut grads, mut dx) = (vec![0.0; params.len()], vec![0.0; x.len()]);
+        let (mut grads, mut dx) = (vec![0.0; mlp.params().len()], vec![0.0; x.len()]);
         mlp.backward(&params.values, &x, n, &mut acts, &r, Some(&mut grads), Some(&mut dx));
         let f64s = |v: &[f32]| v.iter().map(|&a| f64::from(a)).collect::<Vec<_>>();
         let f32s = |v: &[f64]| v.iter().map(|&a| a as f32).collect::<Vec<_>>();
         let numeric = numerical_grad(&f64s(&params.values), 1e-2, |v| loss(&f32s(v), &x));
-        assert_close(&grads, &numeric, 1e-2, "mlp weight gradient");
+        assert_close(&grads, &numeric[mlp.params()], 1e-2, "mlp weight gradient");
         let numeric_x = numerical_grad(&f64s(&x), 1e-2, |v| loss(&params.values, &f32s(v)));
         assert_close(&dx, &numeric_x, 1e-2, "mlp input gradient");
 

@@ -11,7 +11,7 @@
 
 use crate::nn::adam::{Adam, AdamConfig};
 use crate::nn::sac::config::ACTION_LEN;
-use crate::nn::sac::mlp::MlpActivations;
+use crate::nn::sac::mlp::{Mlp, MlpActivations};
 use crate::nn::sac::networks::{FeatureWorkspace, Observations, SacNetworks};
 use crate::nn::sac::tanh_gaussian::{self, HEAD_LEN};
 use crate::nn::sac::zeroed;
@@ -100,22 +100,32 @@ struct UpdateWorkspace {
     next_features: Vec<f32>,
     target_features: Vec<f32>,
     actor: MlpActivations,
-    critics: [MlpActivations; 2],
+    critics: [CriticBuffers; 2],
     critic_input: Vec<f32>,
     d_critic_input: Vec<f32>,
     next_actions: Vec<f32>,
     next_log_prob: Vec<f32>,
-    /// Both critics' outputs (target, then for the actor's actions).
-    q: [Vec<f32>; 2],
     y: Vec<f32>,
     pi_actions: Vec<f32>,
     log_prob: Vec<f32>,
-    d_q: Vec<f32>,
+    /// Per transition, whether Q₁(s, ã) ≤ Q₂(s, ã): the critic the actor's gradient flows through.
+    first_smaller: Vec<bool>,
     d_actions: Vec<f32>,
     d_log_prob: Vec<f32>,
     d_head: Vec<f32>,
     d_features: Vec<f32>,
     grads: Vec<f32>,
+}
+
+/// One critic's buffers: the critics run side by side, so each writes only its own.
+#[derive(Clone, Debug, Default)]
+struct CriticBuffers {
+    acts: MlpActivations,
+    /// Its output of the last forward pass (target, then for the actor's actions).
+    q: Vec<f32>,
+    d_q: Vec<f32>,
+    /// The gradient of its input, `[n][f + 2]`.
+    d_input: Vec<f32>,
 }
 
 /// The learner's whole state: networks, target critics, optimizers, entropy coefficient.
@@ -192,14 +202,16 @@ impl SacLearner {
         tanh_gaussian::sample(ws.actor.output(), next_noise, &mut ws.next_actions, &mut ws.next_log_prob);
         nets.encode(target, &batch.next_obs, &mut ws.next_encoders, &mut ws.target_features);
         concat(&ws.target_features, &ws.next_actions, f, &mut ws.critic_input);
-        for (critic, (acts, q)) in nets.critics.iter().zip(ws.critics.iter_mut().zip(&mut ws.q)) {
-            critic.forward(target, &ws.critic_input, n, acts);
-            q.clear();
-            q.extend_from_slice(acts.output());
-        }
+        let input = &ws.critic_input;
+        both_critics(&nets.critics, &mut ws.critics, [(), ()], |critic, c, ()| {
+            critic.forward(target, input, n, &mut c.acts);
+            c.q.clear();
+            c.q.extend_from_slice(c.acts.output());
+        });
+        let [q1, q2] = [&ws.critics[0].q, &ws.critics[1].q];
         ws.y.clear();
         ws.y.extend((0..n).map(|k| {
-            let min_q = ws.q[0][k].min(ws.q[1][k]);
+            let min_q = q1[k].min(q2[k]);
             batch.rewards[k] + gamma * (1.0 - batch.dones[k]) * (min_q - alpha * ws.next_log_prob[k])
         }));
 
@@ -207,27 +219,21 @@ impl SacLearner {
         zeroed(&mut ws.grads, values.len());
         nets.encode(values, &batch.obs, &mut ws.encoders, &mut ws.features);
         concat(&ws.features, batch.actions, f, &mut ws.critic_input);
-        zeroed(&mut ws.d_critic_input, n * (f + ACTION_LEN));
-        let (mut critic_loss, mut q_mean) = (0.0, 0.0);
-        for (i, (critic, acts)) in nets.critics.iter().zip(&mut ws.critics).enumerate() {
-            critic.forward(values, &ws.critic_input, n, acts);
-            let q = acts.output();
-            ws.d_q.clear();
-            ws.d_q.extend(q.iter().zip(&ws.y).map(|(q, y)| 2.0 * (q - y) / n as f32));
-            critic_loss += q.iter().zip(&ws.y).map(|(q, y)| (q - y) * (q - y)).sum::<f32>() / n as f32;
-            if i == 0 {
-                q_mean = q.iter().sum::<f32>() / n as f32;
-            }
-            critic.backward(
-                values,
-                &ws.critic_input,
-                n,
-                acts,
-                &ws.d_q,
-                Some(&mut ws.grads),
-                Some(&mut ws.d_critic_input),
-            );
-        }
+        let (input, y) = (&ws.critic_input, &ws.y);
+        let critic_grads = critics_part(nets, &mut ws.grads);
+        both_critics(&nets.critics, &mut ws.critics, critic_grads, |critic, c, grads| {
+            critic.forward(values, input, n, &mut c.acts);
+            c.q.clear();
+            c.q.extend_from_slice(c.acts.output());
+            c.d_q.clear();
+            c.d_q.extend(c.q.iter().zip(y).map(|(q, y)| 2.0 * (q - y) / n as f32));
+            zeroed(&mut c.d_input, input.len());
+            critic.backward(values, input, n, &mut c.acts, &c.d_q, Some(grads), Some(&mut c.d_input));
+        });
+        let mse = |q: &[f32]| q.iter().zip(&ws.y).map(|(q, y)| (q - y) * (q - y)).sum::<f32>() / n as f32;
+        let critic_loss = mse(&ws.critics[0].q) + mse(&ws.critics[1].q);
+        let q_mean = ws.critics[0].q.iter().sum::<f32>() / n as f32;
+        sum_critic_input_grads(&ws.critics, &mut ws.d_critic_input);
         ws.d_features.clear();
         ws.d_features.extend(ws.d_critic_input.chunks_exact(f + ACTION_LEN).flat_map(|row| &row[..f]));
 
@@ -238,23 +244,26 @@ impl SacLearner {
         zeroed(&mut ws.log_prob, n);
         tanh_gaussian::sample(ws.actor.output(), pi_noise, &mut ws.pi_actions, &mut ws.log_prob);
         concat(&ws.features, &ws.pi_actions, f, &mut ws.critic_input);
-        for (critic, (acts, q)) in nets.critics.iter().zip(ws.critics.iter_mut().zip(&mut ws.q)) {
-            critic.forward(values, &ws.critic_input, n, acts);
-            q.clear();
-            q.extend_from_slice(acts.output());
-        }
-        let [q1, q2] = &ws.q;
-        let actor_loss = (0..n).map(|k| alpha * ws.log_prob[k] - q1[k].min(q2[k])).sum::<f32>() / n as f32;
-        zeroed(&mut ws.d_critic_input, n * (f + ACTION_LEN));
-        for (i, (critic, acts)) in nets.critics.iter().zip(&mut ws.critics).enumerate() {
-            // The minimum's gradient flows through the smaller critic only.
-            ws.d_q.clear();
-            ws.d_q.extend((0..n).map(|k| {
-                let chosen = if q1[k] <= q2[k] { 0 } else { 1 };
-                if chosen == i { -1.0 / n as f32 } else { 0.0 }
-            }));
-            critic.backward(values, &ws.critic_input, n, acts, &ws.d_q, None, Some(&mut ws.d_critic_input));
-        }
+        let input = &ws.critic_input;
+        both_critics(&nets.critics, &mut ws.critics, [(), ()], |critic, c, ()| {
+            critic.forward(values, input, n, &mut c.acts);
+            c.q.clear();
+            c.q.extend_from_slice(c.acts.output());
+        });
+        let (critics, log_prob) = (&mut ws.critics, &ws.log_prob);
+        let min_q = |k: usize| critics[0].q[k].min(critics[1].q[k]);
+        let actor_loss = (0..n).map(|k| alpha * log_prob[k] - min_q(k)).sum::<f32>() / n as f32;
+        // The minimum's gradient flows through the smaller critic only.
+        ws.first_smaller.clear();
+        ws.first_smaller.extend((0..n).map(|k| critics[0].q[k] <= critics[1].q[k]));
+        let first_smaller = &ws.first_smaller;
+        both_critics(&nets.critics, critics, [true, false], |critic, c, first| {
+            c.d_q.clear();
+            c.d_q.extend(first_smaller.iter().map(|&f| if f == first { -1.0 / n as f32 } else { 0.0 }));
+            zeroed(&mut c.d_input, input.len());
+            critic.backward(values, input, n, &mut c.acts, &c.d_q, None, Some(&mut c.d_input));
+        });
+        sum_critic_input_grads(&ws.critics, &mut ws.d_critic_input);
         ws.d_actions.clear();
         ws.d_actions.extend(ws.d_critic_input.chunks_exact(f + ACTION_LEN).flat_map(|row| &row[f..]));
         ws.d_log_prob.clear();
@@ -268,11 +277,40 @@ impl SacLearner {
             &ws.d_log_prob,
             &mut ws.d_head,
         );
-        nets.actor.backward(values, &ws.features, n, &mut ws.actor, &ws.d_head, Some(&mut ws.grads), None);
+        let actor_grads = &mut ws.grads[nets.actor.params()];
+        nets.actor.backward(values, &ws.features, n, &mut ws.actor, &ws.d_head, Some(actor_grads), None);
         nets.encode_backward(values, &batch.obs, &mut ws.encoders, &ws.d_features, &mut ws.grads);
         let mean_log_prob = ws.log_prob.iter().sum::<f32>() / n as f32;
         UpdateStats { critic_loss, actor_loss, alpha, q: q_mean, entropy: -mean_log_prob }
     }
+}
+
+/// Runs `step` on both critics at once, each with its own buffers and its `part` (its slice of
+/// the gradient, or a flag): the twins write nothing in common, and their MLPs, a third of a
+/// one-thread update, would otherwise leave the second core idle. Each critic's arithmetic is
+/// the same whichever thread runs it.
+fn both_critics<P: Send>(
+    critics: &[Mlp; 2],
+    buffers: &mut [CriticBuffers; 2],
+    [p1, p2]: [P; 2],
+    step: impl Fn(&Mlp, &mut CriticBuffers, P) + Sync,
+) {
+    let [b1, b2] = buffers;
+    rayon::join(|| step(&critics[0], b1, p1), || step(&critics[1], b2, p2));
+}
+
+/// The two critics' parts of the arena's gradient, side by side.
+fn critics_part<'a>(nets: &SacNetworks, grads: &'a mut [f32]) -> [&'a mut [f32]; 2] {
+    let [r1, r2] = [nets.critics[0].params(), nets.critics[1].params()];
+    assert_eq!(r1.end, r2.start, "the critics' tensors are adjacent in the arena");
+    let (g1, g2) = grads[r1.start..r2.end].split_at_mut(r1.len());
+    [g1, g2]
+}
+
+/// `d_input` ← the sum of both critics' input gradients, first critic first.
+fn sum_critic_input_grads(critics: &[CriticBuffers; 2], d_input: &mut Vec<f32>) {
+    d_input.clear();
+    d_input.extend(critics[0].d_input.iter().zip(&critics[1].d_input).map(|(a, b)| a + b));
 }
 
 /// Rows of `features` `[n][f]` ⊕ `actions` `[n][2]` into `out` `[n][f + 2]`.
