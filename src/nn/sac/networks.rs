@@ -15,6 +15,9 @@ use rayon::prelude::*;
 /// of threads.
 pub const ENCODER_CHUNK: usize = 32;
 
+/// Gradient values per parallel slice when the chunks' encoder gradients are summed.
+const SUM_SLICE: usize = 1 << 15;
+
 /// A batch of observations as network inputs: belief crops `[n][channels][cells][cells]`, LiDAR
 /// grids `[n][1][cells][cells]`, robot states ⊕ depth strips `[n][config.state_len()]`.
 #[derive(Clone, Copy, Debug)]
@@ -166,9 +169,14 @@ impl SacNetworks {
                 self.grid.backward(values, &obs.grid[start * gl..(start + m) * gl], m, grid, d_grid, grads);
             },
         );
-        for chunk in &ws.chunks[..obs.n.div_ceil(ENCODER_CHUNK)] {
-            grads[..enc].iter_mut().zip(&chunk.grads).for_each(|(g, c)| *g += c);
-        }
+        // The chunks' gradients summed in chunk order, over fixed slices of the arena in
+        // parallel: the same bytes on any number of threads.
+        let chunks = &ws.chunks[..obs.n.div_ceil(ENCODER_CHUNK)];
+        grads[..enc].par_chunks_mut(SUM_SLICE).enumerate().for_each(|(k, g)| {
+            for chunk in chunks {
+                g.iter_mut().zip(&chunk.grads[k * SUM_SLICE..]).for_each(|(g, c)| *g += c);
+            }
+        });
     }
 
     /// The actor's heads `[n][4]` (means, log-standard deviations) for a batch of observations.

@@ -15,7 +15,11 @@ use crate::nn::sac::mlp::{Mlp, MlpActivations};
 use crate::nn::sac::networks::{FeatureWorkspace, Observations, SacNetworks};
 use crate::nn::sac::tanh_gaussian::{self, HEAD_LEN};
 use crate::nn::sac::zeroed;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+
+/// Parameters per parallel slice of the Polyak average.
+const SLICE: usize = 1 << 15;
 
 /// SAC's hyper-parameters; defaults are the paper's.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -175,11 +179,15 @@ impl SacLearner {
         // entropy is below the target H̄ and shrinks above it.
         alpha_adam.update(std::slice::from_mut(log_alpha), &[stats.entropy - hyper.target_entropy]);
 
-        // Target critics: θ̄ ← τ θ + (1 − τ) θ̄.
+        // Target critics: θ̄ ← τ θ + (1 − τ) θ̄ (in fixed slices on the pool: element-wise, so
+        // the same bytes on any number of threads).
         let tau = hyper.tau;
-        for (t, &v) in target[..nets.critic_len].iter_mut().zip(&nets.params.values[..nets.critic_len]) {
-            *t = tau * v + (1.0 - tau) * *t;
-        }
+        let online = &nets.params.values[..nets.critic_len];
+        target[..nets.critic_len].par_chunks_mut(SLICE).zip(online.par_chunks(SLICE)).for_each(|(t, v)| {
+            for (t, &v) in t.iter_mut().zip(v) {
+                *t = tau * v + (1.0 - tau) * *t;
+            }
+        });
         stats
     }
 
