@@ -203,12 +203,19 @@ impl SacLearner {
 
         // Soft Bellman target, no gradient:
         // y = r + γ (1 − d) (min_i Q̄_i(s′, a′) − α log π(a′|s′)),  a′ ~ π(·|s′).
+        // The actor (one thread) beside the target encoders (the pool): neither reads the other.
         nets.encode(values, &batch.next_obs, &mut ws.next_encoders, &mut ws.next_features);
-        nets.actor.forward(values, &ws.next_features, n, &mut ws.actor);
-        zeroed(&mut ws.next_actions, n * ACTION_LEN);
-        zeroed(&mut ws.next_log_prob, n);
-        tanh_gaussian::sample(ws.actor.output(), next_noise, &mut ws.next_actions, &mut ws.next_log_prob);
-        nets.encode(target, &batch.next_obs, &mut ws.next_encoders, &mut ws.target_features);
+        rayon::join(
+            || {
+                nets.actor.forward(values, &ws.next_features, n, &mut ws.actor);
+                zeroed(&mut ws.next_actions, n * ACTION_LEN);
+                zeroed(&mut ws.next_log_prob, n);
+                let (mean_log_std, a, log_prob) =
+                    (ws.actor.output(), &mut ws.next_actions, &mut ws.next_log_prob);
+                tanh_gaussian::sample(mean_log_std, next_noise, a, log_prob);
+            },
+            || nets.encode(target, &batch.next_obs, &mut ws.next_encoders, &mut ws.target_features),
+        );
         concat(&ws.target_features, &ws.next_actions, f, &mut ws.critic_input);
         let input = &ws.critic_input;
         both_critics(&nets.critics, &mut ws.critics, [(), ()], |critic, c, ()| {
@@ -285,9 +292,30 @@ impl SacLearner {
             &ws.d_log_prob,
             &mut ws.d_head,
         );
-        let actor_grads = &mut ws.grads[nets.actor.params()];
-        nets.actor.backward(values, &ws.features, n, &mut ws.actor, &ws.d_head, Some(actor_grads), None);
-        nets.encode_backward(values, &batch.obs, &mut ws.encoders, &ws.d_features, &mut ws.grads);
+        // The actor's backward beside the encoders' (the critic loss's): separate gradients.
+        let (encoders_and_critics, actor_grads) = ws.grads.split_at_mut(nets.critic_len);
+        rayon::join(
+            || {
+                nets.actor.backward(
+                    values,
+                    &ws.features,
+                    n,
+                    &mut ws.actor,
+                    &ws.d_head,
+                    Some(actor_grads),
+                    None,
+                )
+            },
+            || {
+                nets.encode_backward(
+                    values,
+                    &batch.obs,
+                    &mut ws.encoders,
+                    &ws.d_features,
+                    encoders_and_critics,
+                )
+            },
+        );
         let mean_log_prob = ws.log_prob.iter().sum::<f32>() / n as f32;
         UpdateStats { critic_loss, actor_loss, alpha, q: q_mean, entropy: -mean_log_prob }
     }
