@@ -8,6 +8,10 @@
 //! networks), and the update, not the simulator, bounds training on two cores. As in the JAX
 //! peer's shared variant, one Adam step applies the critic and actor gradients together, the
 //! actor's loss seeing the critics as they were before the step.
+//!
+//! On two cores the twin critics run side by side, and the actor's passes beside the encoders'
+//! (`rayon::join`): each writes only its own buffers and slice of the gradient, so no sum's
+//! order, and no byte of the result, depends on which thread ran what.
 
 use crate::nn::adam::{Adam, AdamConfig};
 use crate::nn::sac::config::ACTION_LEN;
@@ -132,6 +136,15 @@ struct CriticBuffers {
     d_input: Vec<f32>,
 }
 
+impl CriticBuffers {
+    /// `critic`'s forward pass on `input`, its output kept in `q`.
+    fn forward(&mut self, critic: &Mlp, weights: &[f32], input: &[f32], n: usize) {
+        critic.forward(weights, input, n, &mut self.acts);
+        self.q.clear();
+        self.q.extend_from_slice(self.acts.output());
+    }
+}
+
 /// The learner's whole state: networks, target critics, optimizers, entropy coefficient.
 #[derive(Clone, Debug)]
 pub struct SacLearner {
@@ -217,12 +230,7 @@ impl SacLearner {
             || nets.encode(target, &batch.next_obs, &mut ws.next_encoders, &mut ws.target_features),
         );
         concat(&ws.target_features, &ws.next_actions, f, &mut ws.critic_input);
-        let input = &ws.critic_input;
-        both_critics(&nets.critics, &mut ws.critics, [(), ()], |critic, c, ()| {
-            critic.forward(target, input, n, &mut c.acts);
-            c.q.clear();
-            c.q.extend_from_slice(c.acts.output());
-        });
+        forward_critics(&nets.critics, &mut ws.critics, target, &ws.critic_input, n);
         let [q1, q2] = [&ws.critics[0].q, &ws.critics[1].q];
         ws.y.clear();
         ws.y.extend((0..n).map(|k| {
@@ -237,9 +245,7 @@ impl SacLearner {
         let (input, y) = (&ws.critic_input, &ws.y);
         let critic_grads = critics_part(nets, &mut ws.grads);
         both_critics(&nets.critics, &mut ws.critics, critic_grads, |critic, c, grads| {
-            critic.forward(values, input, n, &mut c.acts);
-            c.q.clear();
-            c.q.extend_from_slice(c.acts.output());
+            c.forward(critic, values, input, n);
             c.d_q.clear();
             c.d_q.extend(c.q.iter().zip(y).map(|(q, y)| 2.0 * (q - y) / n as f32));
             zeroed(&mut c.d_input, input.len());
@@ -259,12 +265,8 @@ impl SacLearner {
         zeroed(&mut ws.log_prob, n);
         tanh_gaussian::sample(ws.actor.output(), pi_noise, &mut ws.pi_actions, &mut ws.log_prob);
         concat(&ws.features, &ws.pi_actions, f, &mut ws.critic_input);
+        forward_critics(&nets.critics, &mut ws.critics, values, &ws.critic_input, n);
         let input = &ws.critic_input;
-        both_critics(&nets.critics, &mut ws.critics, [(), ()], |critic, c, ()| {
-            critic.forward(values, input, n, &mut c.acts);
-            c.q.clear();
-            c.q.extend_from_slice(c.acts.output());
-        });
         let (critics, log_prob) = (&mut ws.critics, &ws.log_prob);
         let min_q = |k: usize| critics[0].q[k].min(critics[1].q[k]);
         let actor_loss = (0..n).map(|k| alpha * log_prob[k] - min_q(k)).sum::<f32>() / n as f32;
@@ -333,6 +335,17 @@ fn both_critics<P: Send>(
 ) {
     let [b1, b2] = buffers;
     rayon::join(|| step(&critics[0], b1, p1), || step(&critics[1], b2, p2));
+}
+
+/// Both critics' forward passes on `input` with `weights` (online or target), side by side.
+fn forward_critics(
+    critics: &[Mlp; 2],
+    buffers: &mut [CriticBuffers; 2],
+    weights: &[f32],
+    input: &[f32],
+    n: usize,
+) {
+    both_critics(critics, buffers, [(), ()], |critic, c, ()| c.forward(critic, weights, input, n));
 }
 
 /// The two critics' parts of the arena's gradient, side by side.
