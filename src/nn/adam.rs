@@ -3,6 +3,7 @@
 //! p −= lr·sqrt(1−β2^t)/(1−β1^t) · m / (sqrt(v) + ε).
 //! Note ε is added to sqrt(v) *before* bias correction, unlike the paper's ε̂.
 
+use crate::nn::PARALLEL_SLICE;
 use rayon::prelude::*;
 
 /// Hyper-parameters; defaults are Keras's.
@@ -57,16 +58,13 @@ impl Adam {
         // Fixed-size slices, so the thread count never changes which element goes where (and
         // each element's arithmetic is its own: the bytes are the same on any number of threads).
         values
-            .par_chunks_mut(CHUNK)
-            .zip(grads.par_chunks(CHUNK))
-            .zip(self.m.par_chunks_mut(CHUNK))
-            .zip(self.v.par_chunks_mut(CHUNK))
+            .par_chunks_mut(PARALLEL_SLICE)
+            .zip(grads.par_chunks(PARALLEL_SLICE))
+            .zip(self.m.par_chunks_mut(PARALLEL_SLICE))
+            .zip(self.v.par_chunks_mut(PARALLEL_SLICE))
             .for_each(|(((p, g), m), v)| step.apply(p, g, m, v));
     }
 }
-
-/// Parameters per parallel slice of an update.
-const CHUNK: usize = 1 << 15;
 
 /// One step's factors.
 #[derive(Clone, Copy)]

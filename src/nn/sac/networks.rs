@@ -3,6 +3,7 @@
 //! prefix. The encoders are shared: trained by the critics' loss only, read by the actor with the
 //! gradient stopped (the DrQ / SAC-AE arrangement; see `update.rs` for why).
 
+use crate::nn::PARALLEL_SLICE;
 use crate::nn::params::Params;
 use crate::nn::sac::config::{ACTION_LEN, SacNetConfig};
 use crate::nn::sac::encoder::{EncoderActivations, ImageEncoder};
@@ -14,9 +15,6 @@ use rayon::prelude::*;
 /// Samples per parallel encoder task. Fixed, so gradients sum in the same order on any number
 /// of threads.
 pub const ENCODER_CHUNK: usize = 32;
-
-/// Gradient values per parallel slice when the chunks' encoder gradients are summed.
-const SUM_SLICE: usize = 1 << 15;
 
 /// A batch of observations as network inputs: belief crops `[n][channels][cells][cells]`, LiDAR
 /// grids `[n][1][cells][cells]`, robot states ⊕ depth strips `[n][config.state_len()]`.
@@ -172,9 +170,9 @@ impl SacNetworks {
         // The chunks' gradients summed in chunk order, over fixed slices of the arena in
         // parallel: the same bytes on any number of threads.
         let chunks = &ws.chunks[..obs.n.div_ceil(ENCODER_CHUNK)];
-        grads[..enc].par_chunks_mut(SUM_SLICE).enumerate().for_each(|(k, g)| {
+        grads[..enc].par_chunks_mut(PARALLEL_SLICE).enumerate().for_each(|(k, g)| {
             for chunk in chunks {
-                g.iter_mut().zip(&chunk.grads[k * SUM_SLICE..]).for_each(|(g, c)| *g += c);
+                g.iter_mut().zip(&chunk.grads[k * PARALLEL_SLICE..]).for_each(|(g, c)| *g += c);
             }
         });
     }

@@ -13,6 +13,7 @@
 //! (`rayon::join`): each writes only its own buffers and slice of the gradient, so no sum's
 //! order, and no byte of the result, depends on which thread ran what.
 
+use crate::nn::PARALLEL_SLICE;
 use crate::nn::adam::{Adam, AdamConfig};
 use crate::nn::sac::config::ACTION_LEN;
 use crate::nn::sac::mlp::{Mlp, MlpActivations};
@@ -21,9 +22,6 @@ use crate::nn::sac::tanh_gaussian::{self, HEAD_LEN};
 use crate::nn::sac::zeroed;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-
-/// Parameters per parallel slice of the Polyak average.
-const SLICE: usize = 1 << 15;
 
 /// SAC's hyper-parameters; defaults are the paper's.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -196,11 +194,14 @@ impl SacLearner {
         // the same bytes on any number of threads).
         let tau = hyper.tau;
         let online = &nets.params.values[..nets.critic_len];
-        target[..nets.critic_len].par_chunks_mut(SLICE).zip(online.par_chunks(SLICE)).for_each(|(t, v)| {
-            for (t, &v) in t.iter_mut().zip(v) {
-                *t = tau * v + (1.0 - tau) * *t;
-            }
-        });
+        target[..nets.critic_len]
+            .par_chunks_mut(PARALLEL_SLICE)
+            .zip(online.par_chunks(PARALLEL_SLICE))
+            .for_each(|(t, v)| {
+                for (t, &v) in t.iter_mut().zip(v) {
+                    *t = tau * v + (1.0 - tau) * *t;
+                }
+            });
         stats
     }
 
