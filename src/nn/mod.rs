@@ -5,6 +5,7 @@
 
 pub mod activation;
 pub mod adam;
+pub mod buffers;
 pub mod checkpoint;
 pub mod conv;
 pub mod dense;

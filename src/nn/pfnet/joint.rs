@@ -9,8 +9,8 @@
 //! products cover only the map channels.
 
 use super::config::PfNetConfig;
-use super::stage::{sized, zeroed};
 use crate::nn::activation::{relu_backward, relu_forward};
+use crate::nn::buffers::{sized, zeroed};
 use crate::nn::conv::Padding;
 use crate::nn::dense::Dense;
 use crate::nn::locally_connected::LocallyConnected2d;
@@ -232,7 +232,7 @@ impl Joint {
         dense.backward(p.get(*w), &a.pooled, n, dloglik, dw, db, Some(&mut a.grad_pooled));
         zeroed(&mut a.grad_relu, n * channels * o * o);
         POOL.backward(&a.grad_pooled, &a.argmax, n * channels, o, o, &mut a.grad_relu);
-        a.grad_local.resize(n * channels * o * o, 0.0);
+        sized(&mut a.grad_local, n * channels * o * o);
         relu_backward(&a.local, &a.grad_relu, &mut a.grad_local);
         zeroed(&mut a.dinput, n * self.input_len());
         for (offset, (layer, w, b)) in self.layers() {

@@ -5,7 +5,8 @@
 //! → LayerNorm → ReLU → 14×14×8.
 
 use super::config::PfNetConfig;
-use super::stage::{Branches, NormRelu, sized, zeroed};
+use super::stage::{Branches, NormRelu};
+use crate::nn::buffers::{sized, zeroed};
 use crate::nn::conv::Padding;
 use crate::nn::params::Params;
 use crate::nn::pool::MaxPool2d;

@@ -5,7 +5,8 @@
 //! → 14×14×16 → LayerNorm → ReLU → 14×14×16.
 
 use super::config::PfNetConfig;
-use super::stage::{Branches, NormRelu, PooledScratch, sized, zeroed};
+use super::stage::{Branches, NormRelu, PooledScratch};
+use crate::nn::buffers::{sized, zeroed};
 use crate::nn::conv::Padding;
 use crate::nn::params::Params;
 use crate::nn::pool::MaxPool2d;

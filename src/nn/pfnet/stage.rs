@@ -3,6 +3,7 @@
 
 use super::config::ConvBranch;
 use crate::nn::activation::relu_forward;
+use crate::nn::buffers::{sized, zeroed};
 use crate::nn::conv::{Conv2d, Padding};
 use crate::nn::layer_norm::LayerNorm;
 use crate::nn::params::{ParamId, Params};
@@ -213,17 +214,6 @@ impl NormRelu {
         let (dgamma, dbeta) = p.pair_mut(grads, self.gamma, self.beta);
         self.norm.backward_relu(gamma, beta, x, stats, dy, n, hw, dgamma, dbeta, dx);
     }
-}
-
-/// Resizes `buf` to `len` zeros (the buffer keeps its capacity, so steady state allocates nothing).
-pub fn zeroed(buf: &mut Vec<f32>, len: usize) {
-    buf.clear();
-    buf.resize(len, 0.0);
-}
-
-/// Resizes `buf` to `len` without clearing what a forward pass will overwrite anyway.
-pub fn sized(buf: &mut Vec<f32>, len: usize) {
-    buf.resize(len, 0.0);
 }
 
 #[cfg(test)]

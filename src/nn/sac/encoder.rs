@@ -8,11 +8,11 @@
 //! layout the weights are stored in.
 
 use crate::nn::activation::{relu_backward, relu_forward};
+use crate::nn::buffers::{sized, zeroed};
 use crate::nn::conv::{Conv2d, Padding};
 use crate::nn::dense::Dense;
 use crate::nn::params::Params;
 use crate::nn::sac::layer::WeightBias;
-use crate::nn::sac::zeroed;
 
 /// Samples taken through every convolution together on the channel-last path: their first layer
 /// outputs (≤ 93 KB each for the paper's 56 × 56 grid) stay in a core's L2 for the second.
@@ -118,7 +118,7 @@ impl ImageEncoder {
         assert_eq!(x.len(), n * self.input_len, "encoder input length");
         acts.conv_out.resize(self.convs.len(), Vec::new());
         for (l, y) in self.convs.iter().zip(&mut acts.conv_out) {
-            y.resize(n * l.output_len(), 0.0);
+            sized(y, n * l.output_len());
         }
         if self.channel_last {
             self.convs_channel_last(values, x, n, acts);
@@ -186,7 +186,7 @@ impl ImageEncoder {
         grads: &mut [f32],
     ) {
         let EncoderActivations { conv_out, flat, features, d_pre, d_input, scratch, .. } = acts;
-        d_pre.resize(features.len(), 0.0);
+        sized(d_pre, features.len());
         relu_backward(features, d_features, d_pre);
         let last = if self.channel_last { &flat[..] } else { conv_out.last().expect("forward ran") };
         zeroed(d_input, last.len());
@@ -195,13 +195,13 @@ impl ImageEncoder {
         if self.channel_last {
             // d(flat) channel-major → the last convolution's channel-last layout, via d_pre.
             let (p, c) = self.last_shape();
-            d_pre.resize(d_input.len(), 0.0);
+            sized(d_pre, d_input.len());
             transpose_samples(d_input, n, c, p, d_pre);
             std::mem::swap(d_input, d_pre);
         }
         for (i, l) in self.convs.iter().enumerate().rev() {
             // d_input holds d(post-ReLU output of layer i); through the ReLU into d_pre.
-            d_pre.resize(conv_out[i].len(), 0.0);
+            sized(d_pre, conv_out[i].len());
             relu_backward(&conv_out[i], d_input, d_pre);
             let input = if i == 0 { x } else { &conv_out[i - 1] };
             let (dw, db) = l.wb.split_mut(grads);

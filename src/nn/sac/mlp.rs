@@ -1,10 +1,10 @@
 //! The actor's and critics' heads: dense layers with ReLU between them and a linear output.
 
 use crate::nn::activation::{relu_backward, relu_forward};
+use crate::nn::buffers::{sized, zeroed};
 use crate::nn::dense::Dense;
 use crate::nn::params::Params;
 use crate::nn::sac::layer::WeightBias;
-use crate::nn::sac::zeroed;
 use std::ops::Range;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -112,7 +112,7 @@ impl Mlp {
                 break;
             }
             // Through the ReLU of the layer below: d_out ← d_in · [y > 0].
-            d_out.resize(d_in.len(), 0.0);
+            sized(d_out, d_in.len());
             relu_backward(input, d_in, d_out);
         }
         if let Some(dx) = dx {

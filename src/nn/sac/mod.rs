@@ -12,9 +12,3 @@ pub mod update;
 pub use config::{ACTION_LEN, STATE_LEN, SacNetConfig};
 pub use networks::{Observations, PolicyWorkspace, SacNetworks};
 pub use update::{SacHyper, SacLearner, Transitions, UpdateStats};
-
-/// Zeroes `buf` at length `len`, keeping its allocation (backward passes accumulate into it).
-fn zeroed(buf: &mut Vec<f32>, len: usize) {
-    buf.clear();
-    buf.resize(len, 0.0);
-}

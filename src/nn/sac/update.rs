@@ -15,11 +15,11 @@
 
 use crate::nn::PARALLEL_SLICE;
 use crate::nn::adam::{Adam, AdamConfig};
+use crate::nn::buffers::zeroed;
 use crate::nn::sac::config::ACTION_LEN;
 use crate::nn::sac::mlp::{Mlp, MlpActivations};
 use crate::nn::sac::networks::{FeatureWorkspace, Observations, SacNetworks};
 use crate::nn::sac::tanh_gaussian::{self, HEAD_LEN};
-use crate::nn::sac::zeroed;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
