@@ -147,7 +147,68 @@ impl LocallyConnected2d {
         dx: Option<&mut [f32]>,
         scratch: &mut Vec<f32>,
     ) {
-        self.backward_chunked(weight, x, n, dy, y_channels, y_offset, dweight, dbias, dx, scratch, CHUNK);
+        self.backward_chunked(
+            weight,
+            x,
+            n,
+            dy,
+            y_channels,
+            y_offset,
+            dweight,
+            Some(dbias),
+            dx,
+            scratch,
+            CHUNK,
+        );
+    }
+
+    /// `backward` of the products `forward_own_channels` computes: x holds the first `c_own`
+    /// input channels, `[n][c_own][h][w]`; accumulates their columns of `dweight` and their `dx`
+    /// (if given). The bias and the shared channels are the caller's: their gradients come from
+    /// each group's dy summed over its samples, a `backward` over the groups alone. `own` holds
+    /// the own channels' weights and their gradient, laid out compactly for the GEMMs.
+    #[allow(clippy::too_many_arguments)]
+    pub fn backward_own_channels(
+        &self,
+        weight: &[f32],
+        x: &[f32],
+        c_own: usize,
+        n: usize,
+        dy: &[f32],
+        y_channels: usize,
+        y_offset: usize,
+        dweight: &mut [f32],
+        dx: Option<&mut [f32]>,
+        own: &mut Vec<f32>,
+        scratch: &mut Vec<f32>,
+    ) {
+        assert!(c_own <= self.c_in, "own channels past c_in");
+        assert_eq!(dweight.len(), self.weight_len(), "dweight length");
+        let layer = Self { c_in: c_own, ..*self };
+        let len = layer.weight_len();
+        own.clear();
+        own.resize(2 * len, 0.0);
+        let (own_weight, own_dweight) = own.split_at_mut(len);
+        // Rows of W_p are [kh][kw][c_in]: every run of c_in columns gives its first c_own.
+        for (part, full) in own_weight.chunks_exact_mut(c_own).zip(weight.chunks_exact(self.c_in)) {
+            part.copy_from_slice(&full[..c_own]);
+        }
+        layer.backward_chunked(
+            own_weight,
+            x,
+            n,
+            dy,
+            y_channels,
+            y_offset,
+            own_dweight,
+            None,
+            dx,
+            scratch,
+            CHUNK,
+        );
+        for (full, part) in dweight.chunks_exact_mut(self.c_in).zip(own_dweight.chunks_exact(c_own)) {
+            full[..c_own].iter_mut().zip(part).for_each(|(d, g)| *d += g);
+        }
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -381,14 +442,16 @@ impl LocallyConnected2d {
         y_channels: usize,
         y_offset: usize,
         dweight: &mut [f32],
-        dbias: &mut [f32],
+        mut dbias: Option<&mut [f32]>,
         mut dx: Option<&mut [f32]>,
         scratch: &mut Vec<f32>,
         chunk: usize,
     ) {
         self.check_shapes(weight, x, self.c_in, n, dy, y_channels, y_offset);
         assert_eq!(dweight.len(), self.weight_len(), "dweight length");
-        assert_eq!(dbias.len(), self.bias_len(), "dbias length");
+        if let Some(dbias) = dbias.as_deref() {
+            assert_eq!(dbias.len(), self.bias_len(), "dbias length");
+        }
         if let Some(dx) = dx.as_deref() {
             assert_eq!(dx.len(), x.len(), "dx length");
         }
@@ -423,8 +486,10 @@ impl LocallyConnected2d {
             }
             for p in 0..npos {
                 let dyp = view(&dyt[p * f * ld..][..f * ld], f, cs, ld);
-                for (fi, db) in dbias[p * f..][..f].iter_mut().enumerate() {
-                    *db += dyt[(p * f + fi) * ld..][..cs].iter().sum::<f32>();
+                if let Some(dbias) = dbias.as_deref_mut() {
+                    for (fi, db) in dbias[p * f..][..f].iter_mut().enumerate() {
+                        *db += dyt[(p * f + fi) * ld..][..cs].iter().sum::<f32>();
+                    }
                 }
                 for kh in 0..k {
                     let start = self.block_start(ld, p, kh);
@@ -527,7 +592,7 @@ mod tests {
 
         let (mut dw, mut db, mut dx) = (vec![0.0; wl], vec![0.0; bl], vec![0.0; x.len()]);
         scratch.fill(f32::NAN);
-        l.backward_chunked(&w, &x, n, &r, yc, yo, &mut dw, &mut db, Some(&mut dx), &mut scratch, chunk);
+        l.backward_chunked(&w, &x, n, &r, yc, yo, &mut dw, Some(&mut db), Some(&mut dx), &mut scratch, chunk);
         let loss = |w: &[f64], b: &[f64], x: &[f64]| -> f64 {
             naive(&l, w, b, x, n, yc, yo).iter().zip(&r64).map(|(y, r)| y * r).sum()
         };
@@ -601,6 +666,44 @@ mod tests {
         check_own_channels(l5, 1, &[1, 1, 0], 2, 0);
         // Every channel own: the base is the bias, whatever the group.
         check_own_channels(l5, 4, &[0, 1], 2, 0);
+    }
+
+    /// `backward_own_channels` against `backward` on the full input: the own channels' columns of
+    /// dW and their dx agree, the shared channels' columns stay as they were.
+    #[test]
+    fn own_channels_backward_matches_the_full_backward() {
+        let l = LocallyConnected2d { c_in: 5, filters: 3, kernel: 3, pad: 1, h: 5, w: 6 };
+        let (n, c_own, hw) = (4, 2, l.h * l.w);
+        let w = test_values(l.weight_len(), 21);
+        let full = test_values(n * l.c_in * hw, 22);
+        let dy = test_values(n * 7 * l.positions(), 23);
+        let own: Vec<f32> = full.chunks_exact(l.c_in * hw).flat_map(|s| s[..c_own * hw].to_vec()).collect();
+        let mut scratch = vec![f32::NAN; 10_000];
+        let (mut dw, mut db, mut dx) =
+            (vec![0.0; l.weight_len()], vec![0.0; l.bias_len()], vec![0.0; full.len()]);
+        l.backward(&w, &full, n, &dy, 7, 3, &mut dw, &mut db, Some(&mut dx), &mut scratch);
+        let (mut dw_own, mut dx_own, mut bufs) =
+            (vec![SENTINEL; l.weight_len()], vec![0.0; own.len()], Vec::new());
+        l.backward_own_channels(
+            &w,
+            &own,
+            c_own,
+            n,
+            &dy,
+            7,
+            3,
+            &mut dw_own,
+            Some(&mut dx_own),
+            &mut bufs,
+            &mut scratch,
+        );
+        for (i, (&got, &want)) in dw_own.iter().zip(&dw).enumerate() {
+            let want = if i % l.c_in < c_own { SENTINEL + want } else { SENTINEL };
+            assert!((got - want).abs() <= 1e-5, "dweight[{i}]: {got} against {want}");
+        }
+        let dx_full_own: Vec<f32> =
+            dx.chunks_exact(l.c_in * hw).flat_map(|s| s[..c_own * hw].to_vec()).collect();
+        assert_close(&dx_own, &to64(&dx_full_own), 1e-5, "lc dx, own channels");
     }
 
     #[test]

@@ -3,10 +3,12 @@
 //! 14×14×(8 + 16) → locally-connected 8@3×3 'valid' ⊕ 8@5×5 (zero pad 1), each with ReLU
 //! → 12×12×16 → max-pool 3×3/2 'valid' → 5×5×16 = 400 → dense → 1.
 //!
-//! Two forward passes: `forward` on the concatenated features, keeping what `backward` needs
-//! (training), and `forward_shared` for the filter, where the particles of one robot share its
-//! observation: that enters once per robot through `observation_terms`, and the particles'
-//! products cover only the map channels.
+//! The particles of one robot (in the filter) or of one step (in training) share its
+//! observation: that enters once through `observation_terms`, and the particles'
+//! locally-connected products cover only the map channels, a third of the paper's. `forward`
+//! keeps what `backward` needs (training); there the particles' output gradients are summed per
+//! step before the observation's products, so the observation's share costs one backward per
+//! step. `forward_shared` is the filter's pass, with nothing kept.
 
 use super::config::PfNetConfig;
 use crate::nn::activation::{relu_backward, relu_forward};
@@ -37,18 +39,28 @@ pub struct Joint {
 /// Everything the forward pass keeps for the backward, for a chunk of particles.
 #[derive(Clone, Debug, Default)]
 pub struct JointActivations {
-    /// The input, [n][map + obs channels][side][side]; callers fill it.
-    pub input: Vec<f32>,
+    /// The observations with zero map channels, [n][map + obs channels][side][side]: the input
+    /// of `observation_terms` and of the observation's share of `backward`.
+    input: Vec<f32>,
+    /// Each step's observation terms and the step of each particle (`forward`).
+    terms: Vec<f32>,
+    step_of: Vec<u32>,
+    /// The locally-connected outputs as the products leave them, [o·o][channels][n].
+    products: Vec<f32>,
+    /// The locally-connected outputs, [n][channels][o][o].
     local: Vec<f32>,
     pooled: Vec<f32>,
     argmax: Vec<u8>,
     /// One log-likelihood per particle.
     pub loglik: Vec<f32>,
-    /// d loss / d input after the backward pass.
-    pub dinput: Vec<f32>,
+    /// d loss / d input (the observations' rows).
+    dinput: Vec<f32>,
     grad_local: Vec<f32>,
+    /// grad_local summed over each step's particles.
+    grad_steps: Vec<f32>,
     grad_pooled: Vec<f32>,
     grad_relu: Vec<f32>,
+    own_weights: Vec<f32>,
     scratch: Vec<f32>,
 }
 
@@ -90,14 +102,42 @@ impl Joint {
         2 * self.lc3.0.filters * self.out_side * self.out_side
     }
 
-    /// acts.input [n][…] → acts.loglik [n].
-    pub fn forward(&self, p: &Params, n: usize, acts: &mut JointActivations) {
-        let channels = 2 * self.lc3.0.filters;
-        sized(&mut acts.local, n * channels * self.out_side * self.out_side);
-        for (offset, (layer, w, b)) in self.layers() {
-            let (w, b) = (p.get(*w), p.get(*b));
-            layer.forward(w, b, &acts.input, n, &mut acts.local, channels, offset, &mut acts.scratch);
+    /// Training's pass over `steps · k` particles, particle i seeing step i / k's observation:
+    /// map features [n][map_channels][side][side] and observation features
+    /// [steps][obs_channels][side][side] → acts.loglik [n], keeping what `backward` needs.
+    pub fn forward(
+        &self,
+        p: &Params,
+        map_features: &[f32],
+        obs_features: &[f32],
+        (steps, k): (usize, usize),
+        acts: &mut JointActivations,
+    ) {
+        let (n, channels, positions) = (steps * k, 2 * self.lc3.0.filters, self.out_side * self.out_side);
+        let mut terms = std::mem::take(&mut acts.terms);
+        sized(&mut terms, steps * self.term_len());
+        self.observation_terms(p, obs_features, steps, &mut terms, acts);
+        acts.step_of.clear();
+        acts.step_of.extend((0..n).map(|i| (i / k) as u32));
+        sized(&mut acts.products, n * channels * positions);
+        for (offset, (layer, w, _)) in self.layers() {
+            let (w, products) = (p.get(*w), &mut acts.products);
+            let (c_map, scratch) = (self.map_channels, &mut acts.scratch);
+            layer.forward_own_channels(
+                w,
+                map_features,
+                c_map,
+                &terms,
+                &acts.step_of,
+                products,
+                channels,
+                offset,
+                scratch,
+            );
         }
+        acts.terms = terms;
+        sized(&mut acts.local, n * channels * positions);
+        samples_outermost(&acts.products, n, channels * positions, positions, &mut acts.local);
         self.head_forward(p, n, acts);
     }
 
@@ -214,15 +254,22 @@ impl Joint {
         dense.forward(p.get(*w), p.get(*b), &acts.pooled, n, &mut acts.loglik);
     }
 
-    /// From d loss / d loglik to the weight gradients (accumulated) and acts.dinput (overwritten).
+    /// The backward pass of `forward` (same map features and `(steps, k)`): from d loss / d loglik
+    /// [n] to the weight gradients (accumulated), d map features `dmap` [n][map_channels][side][side]
+    /// and d observation features `dobs` [steps][obs_channels][side][side] (both overwritten).
+    #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &self,
         p: &Params,
-        n: usize,
+        map_features: &[f32],
+        (steps, k): (usize, usize),
         acts: &mut JointActivations,
         dloglik: &[f32],
         grads: &mut [f32],
+        dmap: &mut [f32],
+        dobs: &mut [f32],
     ) {
+        let n = steps * k;
         let (o, q) = (self.out_side, self.pooled_side);
         let channels = 2 * self.lc3.0.filters;
         let a = acts;
@@ -234,22 +281,74 @@ impl Joint {
         POOL.backward(&a.grad_pooled, &a.argmax, n * channels, o, o, &mut a.grad_relu);
         sized(&mut a.grad_local, n * channels * o * o);
         relu_backward(&a.local, &a.grad_relu, &mut a.grad_local);
-        zeroed(&mut a.dinput, n * self.input_len());
+        // The map channels' products, particle by particle.
+        dmap.fill(0.0);
         for (offset, (layer, w, b)) in self.layers() {
-            let (dw, db) = p.pair_mut(grads, *w, *b);
             let weight = p.get(*w);
+            let (dw, _) = p.pair_mut(grads, *w, *b);
+            let (dy, own, scratch) = (&a.grad_local, &mut a.own_weights, &mut a.scratch);
+            let c_map = self.map_channels;
+            layer.backward_own_channels(
+                weight,
+                map_features,
+                c_map,
+                n,
+                dy,
+                channels,
+                offset,
+                dw,
+                Some(&mut *dmap),
+                own,
+                scratch,
+            );
+        }
+        // The observation's products and the bias, once per step from its particles' summed gradient.
+        let per_particle = channels * o * o;
+        zeroed(&mut a.grad_steps, steps * per_particle);
+        for (i, g) in a.grad_local.chunks_exact(per_particle).take(n).enumerate() {
+            a.grad_steps[i / k * per_particle..][..per_particle].iter_mut().zip(g).for_each(|(s, g)| *s += g);
+        }
+        zeroed(&mut a.dinput, steps * self.input_len());
+        for (offset, (layer, w, b)) in self.layers() {
+            let weight = p.get(*w);
+            let (dw, db) = p.pair_mut(grads, *w, *b);
+            let dinput = Some(&mut a.dinput[..]);
             layer.backward(
                 weight,
                 &a.input,
-                n,
-                &a.grad_local,
+                steps,
+                &a.grad_steps,
                 channels,
                 offset,
                 dw,
                 db,
-                Some(&mut a.dinput),
+                dinput,
                 &mut a.scratch,
             );
+        }
+        let m = self.map_channels * self.side * self.side;
+        for (d, row) in
+            dobs.chunks_exact_mut(self.input_len() - m).zip(a.dinput.chunks_exact(self.input_len()))
+        {
+            d.copy_from_slice(&row[m..]);
+        }
+    }
+}
+
+/// `from` [rows][n] (a row per output channel and position, samples innermost, as the shared
+/// products leave it; row r = position · channels + channel) → `to` [n][channels][positions], in
+/// tiles of 16 samples: a cache line of `from` read at a time, `to` written along its positions.
+fn samples_outermost(from: &[f32], n: usize, rows: usize, positions: usize, to: &mut [f32]) {
+    let channels = rows / positions;
+    for i0 in (0..n).step_by(16) {
+        let tile = 16.min(n - i0);
+        for c in 0..channels {
+            for pos in 0..positions {
+                let row = &from[(pos * channels + c) * n + i0..][..tile];
+                for (j, &v) in row.iter().enumerate() {
+                    to[((i0 + j) * channels + c) * positions + pos] = v;
+                }
+            }
         }
     }
 }

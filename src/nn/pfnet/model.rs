@@ -1,11 +1,13 @@
 //! PF-net's observation model (Karkus et al. 2018; APFN's configuration): for each particle,
 //! log p(observation | particle's local map). The map encoder runs per particle, the observation
-//! encoder once per step, the joint stage per particle on their concatenated features.
+//! encoder once per step, the joint stage per particle on both (the observation's share of its
+//! products once per step).
 
 use super::config::PfNetConfig;
 use super::joint::{Joint, JointActivations};
 use super::map_encoder::{MapActivations, MapEncoder};
 use super::obs_encoder::{ObsActivations, ObsEncoder};
+use crate::nn::buffers::sized;
 use crate::nn::params::Params;
 use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
@@ -163,8 +165,14 @@ impl PfNet {
             }
             MapInput::Features => maps,
         };
-        self.fill_joint_input(map_features, &acts.obs.features, n, k, &mut acts.joint);
-        self.joint.forward(p, n, &mut acts.joint);
+        let obs_features = &acts.obs.features[..steps * self.obs_feature_len()];
+        self.joint.forward(
+            p,
+            &map_features[..n * self.map_feature_len()],
+            obs_features,
+            (steps, k),
+            &mut acts.joint,
+        );
         &acts.joint.loglik[..n]
     }
 
@@ -181,20 +189,14 @@ impl PfNet {
         ws: &mut Workspace,
     ) {
         let (p, acts, n) = (&self.params, &mut ws.acts, steps * k);
-        self.joint.backward(p, n, &mut acts.joint, dloglik, grads);
-        let (per_particle, map_len, obs_len) =
-            (self.joint.input_len(), self.map_feature_len(), self.obs_feature_len());
         let (dmap, dobs) = (&mut ws.grad_map_features, &mut ws.grad_obs_features);
-        dmap.resize(n * map_len, 0.0);
-        dobs.clear();
-        dobs.resize(steps * obs_len, 0.0);
-        for (i, dinput) in acts.joint.dinput.chunks_exact(per_particle).take(n).enumerate() {
-            dmap[i * map_len..(i + 1) * map_len].copy_from_slice(&dinput[..map_len]);
-            // The particles of a step saw the same observation features: their gradients add up.
-            for (d, g) in dobs[i / k * obs_len..][..obs_len].iter_mut().zip(&dinput[map_len..]) {
-                *d += g;
-            }
-        }
+        sized(dmap, n * self.map_feature_len());
+        sized(dobs, steps * self.obs_feature_len());
+        let map_features = match input {
+            MapInput::LocalMaps => &acts.map.features[..n * self.map_feature_len()],
+            MapInput::Features => maps,
+        };
+        self.joint.backward(p, map_features, (steps, k), &mut acts.joint, dloglik, grads, dmap, dobs);
         if input == MapInput::LocalMaps {
             self.map.backward(p, maps, n, &mut acts.map, dmap, grads);
         }
@@ -221,25 +223,6 @@ impl PfNet {
     /// The map encoder itself, for the feature cache's whole-map windows.
     pub(super) fn map_encoder(&self) -> &MapEncoder {
         &self.map
-    }
-
-    /// Map features first, then the features of its step's observation, per particle (the
-    /// reference's concat order); particle i belongs to step i / k.
-    fn fill_joint_input(
-        &self,
-        map_features: &[f32],
-        obs_features: &[f32],
-        n: usize,
-        k: usize,
-        acts: &mut JointActivations,
-    ) {
-        let (m, o) = (self.map_feature_len(), self.obs_feature_len());
-        acts.input.resize(n * (m + o), 0.0);
-        let rows = acts.input.chunks_exact_mut(m + o).zip(map_features.chunks_exact(m)).take(n);
-        for (i, (row, map)) in rows.enumerate() {
-            row[..m].copy_from_slice(map);
-            row[m..].copy_from_slice(&obs_features[i / k * o..][..o]);
-        }
     }
 }
 
