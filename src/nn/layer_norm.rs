@@ -4,12 +4,18 @@
 //! `y = (x − μ) / sqrt(σ² + eps) · γ + β`, μ and σ² (biased) over the channels of one pixel.
 //!
 //! Speed: the channels of a pixel are `hw` apart, so we never walk a pixel's channels one by one.
-//! Pixels are processed in tiles of [`TILE`]; per-pixel accumulators for the tile live on the stack
-//! and every inner loop runs over a contiguous run of one channel row, so it vectorises. A tile of
-//! 64 channels stays in L2 across the passes. No heap scratch is needed.
+//! Pixels are processed in tiles (a whole sample, or [`TILE`] pixels); per-pixel accumulators for
+//! the tile live on the stack and every inner loop runs over a contiguous run of one channel row,
+//! so it vectorises. A tile stays in L2 across the passes. No heap scratch is needed.
 
-/// Pixels per tile: the stack accumulators (4 × TILE f32 in backward) stay in L1.
+/// Most pixels per tile: the stack accumulators (4 × MAX_TILE f32 in backward) stay in L1.
+const MAX_TILE: usize = 1024;
+/// Pixels per tile where a whole sample does not fit [`WHOLE_SAMPLE_BYTES`].
 const TILE: usize = 256;
+/// A sample up to this size is one tile: its channel rows are then one contiguous run, which the
+/// hardware prefetcher streams in (the backward reads x back from memory, long after the forward
+/// wrote it), and it stays in L2 for the second pass.
+const WHOLE_SAMPLE_BYTES: usize = 512 * 1024;
 /// Independent partial sums for the per-channel reductions (dγ, dβ), so they vectorise.
 const LANES: usize = 16;
 
@@ -21,6 +27,12 @@ pub struct LayerNorm {
 }
 
 impl LayerNorm {
+    /// Pixels per tile for samples of `hw` pixels.
+    fn tile(&self, hw: usize) -> usize {
+        let whole = hw <= MAX_TILE && self.channels * hw * size_of::<f32>() <= WHOLE_SAMPLE_BYTES;
+        if whole { hw.max(1) } else { TILE }
+    }
+
     /// x, y: [n][channels][hw]; stats: [n][hw][2] = (mean, 1/sqrt(var+eps)) kept for backward.
     /// gamma, beta: [channels].
     #[allow(clippy::too_many_arguments)]
@@ -78,14 +90,14 @@ impl LayerNorm {
     ) {
         let c = self.channels;
         let inv_c = 1.0 / c as f32;
-        let mut mean_buf = [0.0f32; TILE];
-        let mut rstd_buf = [0.0f32; TILE];
+        let mut mean_buf = [0.0f32; MAX_TILE];
+        let mut rstd_buf = [0.0f32; MAX_TILE];
         for s in 0..n {
             let xs = &x[s * c * hw..][..c * hw];
             let ys = &mut y[s * c * hw..][..c * hw];
             let ss = &mut stats[s * hw * 2..][..hw * 2];
-            for p0 in (0..hw).step_by(TILE) {
-                let t = TILE.min(hw - p0);
+            for p0 in (0..hw).step_by(self.tile(hw)) {
+                let t = self.tile(hw).min(hw - p0);
                 let mean = &mut mean_buf[..t];
                 let rstd = &mut rstd_buf[..t];
                 // Two passes (mean, then squared deviations): robust when |μ| ≫ σ.
@@ -221,21 +233,21 @@ impl LayerNorm {
         use std::arch::x86_64::*;
         let c = self.channels;
         let inv_c = 1.0 / c as f32;
-        let mut mean = [0.0f32; TILE];
-        let mut rstd = [0.0f32; TILE];
-        let mut s1 = [0.0f32; TILE];
-        let mut s2 = [0.0f32; TILE];
+        let mut mean = [0.0f32; MAX_TILE];
+        let mut rstd = [0.0f32; MAX_TILE];
+        let mut s1 = [0.0f32; MAX_TILE];
+        let mut s2 = [0.0f32; MAX_TILE];
         // SAFETY (every intrinsic below): AVX-512F is enabled; loads and stores are masked to
         // `t − v` lanes of rows of length t that lie inside the sample's slices (checked by the
-        // slicing) or inside the TILE-long stack buffers.
+        // slicing) or inside the MAX_TILE-long stack buffers.
         let zero = _mm512_setzero_ps();
         for smp in 0..n {
             let xs = &x[smp * c * hw..][..c * hw];
             let dys = &dy[smp * c * hw..][..c * hw];
             let dxs = &mut dx[smp * c * hw..][..c * hw];
             let ss = &stats[smp * hw * 2..][..hw * 2];
-            for p0 in (0..hw).step_by(TILE) {
-                let t = TILE.min(hw - p0);
+            for p0 in (0..hw).step_by(self.tile(hw)) {
+                let t = self.tile(hw).min(hw - p0);
                 for (i, st) in ss[2 * p0..][..2 * t].chunks_exact(2).enumerate() {
                     mean[i] = st[0];
                     rstd[i] = st[1];
@@ -332,17 +344,17 @@ impl LayerNorm {
     ) {
         let c = self.channels;
         let inv_c = 1.0 / c as f32;
-        let mut mean_buf = [0.0f32; TILE];
-        let mut rstd_buf = [0.0f32; TILE];
-        let mut s1_buf = [0.0f32; TILE];
-        let mut s2_buf = [0.0f32; TILE];
+        let mut mean_buf = [0.0f32; MAX_TILE];
+        let mut rstd_buf = [0.0f32; MAX_TILE];
+        let mut s1_buf = [0.0f32; MAX_TILE];
+        let mut s2_buf = [0.0f32; MAX_TILE];
         for s in 0..n {
             let xs = &x[s * c * hw..][..c * hw];
             let dys = &dy[s * c * hw..][..c * hw];
             let dxs = &mut dx[s * c * hw..][..c * hw];
             let ss = &stats[s * hw * 2..][..hw * 2];
-            for p0 in (0..hw).step_by(TILE) {
-                let t = TILE.min(hw - p0);
+            for p0 in (0..hw).step_by(self.tile(hw)) {
+                let t = self.tile(hw).min(hw - p0);
                 let mean = &mut mean_buf[..t];
                 let rstd = &mut rstd_buf[..t];
                 let s1 = &mut s1_buf[..t];
@@ -466,13 +478,14 @@ mod tests {
         a.iter().zip(r).map(|(&a, &b)| a * f64::from(b)).sum()
     }
 
-    /// hw = 7 (one partial tile, scalar tail) and hw = TILE + 13 (two tiles, odd tail).
+    /// hw = 7 (one partial vector, scalar tail), TILE + 13 (a whole sample as one tile) and
+    /// MAX_TILE + 13 (too many pixels for one: tiles of TILE, odd tail).
     #[test]
     fn layer_norm_matches_naive_and_finite_differences() {
         let ln = LayerNorm { channels: 5, eps: 1e-3 };
         let c = ln.channels;
         let n = 2;
-        for hw in [7, TILE + 13] {
+        for hw in [7, TILE + 13, MAX_TILE + 13] {
             // An offset on x checks the two-pass statistics; non-trivial γ, β.
             let x: Vec<f32> = test_values(n * c * hw, 1).iter().map(|v| v + 3.0).collect();
             let gamma: Vec<f32> = test_values(c, 2).iter().map(|v| 1.0 + 0.5 * v).collect();
@@ -506,12 +519,12 @@ mod tests {
     }
 
     /// backward_relu against finite differences of relu(naive) on a small case, and against
-    /// `backward` of the masked gradient over two tiles.
+    /// `backward` of the masked gradient over one and several tiles.
     #[test]
     fn layer_norm_relu_matches_finite_differences() {
         let ln = LayerNorm { channels: 6, eps: 1e-3 };
         let c = ln.channels;
-        for (n, hw) in [(2, 7), (2, TILE + 21)] {
+        for (n, hw) in [(2, 7), (2, TILE + 21), (2, MAX_TILE + 21)] {
             let x: Vec<f32> = test_values(n * c * hw, 11).iter().map(|v| v - 1.0).collect();
             let gamma: Vec<f32> = test_values(c, 12).iter().map(|v| 1.0 + 0.5 * v).collect();
             let beta = test_values(c, 13);

@@ -189,7 +189,9 @@ impl Plan {
                                 xv[s] = unsafe { _mm512_loadu_ps(x.add(x_at[s] + off)) };
                             }
                             for i in 0..OB {
-                                let wv = _mm512_set1_ps(weight[o[i] * taps + tap]);
+                                // Unchecked: o[i] < c_out and tap < taps (the length asserted in
+                                // `dispatch`); eight bounds checks per tap cost ≈ 5 % of a training step.
+                                let wv = _mm512_set1_ps(unsafe { *weight.get_unchecked(o[i] * taps + tap) });
                                 for s in 0..S {
                                     acc[i][s] = _mm512_fmadd_ps(wv, xv[s], acc[i][s]);
                                 }
