@@ -89,15 +89,15 @@ impl LayerNorm {
         stats: &mut [f32],
     ) {
         let c = self.channels;
-        let inv_c = 1.0 / c as f32;
+        let (inv_c, tile) = (1.0 / c as f32, self.tile(hw));
         let mut mean_buf = [0.0f32; MAX_TILE];
         let mut rstd_buf = [0.0f32; MAX_TILE];
         for s in 0..n {
             let xs = &x[s * c * hw..][..c * hw];
             let ys = &mut y[s * c * hw..][..c * hw];
             let ss = &mut stats[s * hw * 2..][..hw * 2];
-            for p0 in (0..hw).step_by(self.tile(hw)) {
-                let t = self.tile(hw).min(hw - p0);
+            for p0 in (0..hw).step_by(tile) {
+                let t = tile.min(hw - p0);
                 let mean = &mut mean_buf[..t];
                 let rstd = &mut rstd_buf[..t];
                 // Two passes (mean, then squared deviations): robust when |μ| ≫ σ.
@@ -232,7 +232,7 @@ impl LayerNorm {
     ) {
         use std::arch::x86_64::*;
         let c = self.channels;
-        let inv_c = 1.0 / c as f32;
+        let (inv_c, tile) = (1.0 / c as f32, self.tile(hw));
         let mut mean = [0.0f32; MAX_TILE];
         let mut rstd = [0.0f32; MAX_TILE];
         let mut s1 = [0.0f32; MAX_TILE];
@@ -246,8 +246,8 @@ impl LayerNorm {
             let dys = &dy[smp * c * hw..][..c * hw];
             let dxs = &mut dx[smp * c * hw..][..c * hw];
             let ss = &stats[smp * hw * 2..][..hw * 2];
-            for p0 in (0..hw).step_by(self.tile(hw)) {
-                let t = self.tile(hw).min(hw - p0);
+            for p0 in (0..hw).step_by(tile) {
+                let t = tile.min(hw - p0);
                 for (i, st) in ss[2 * p0..][..2 * t].chunks_exact(2).enumerate() {
                     mean[i] = st[0];
                     rstd[i] = st[1];
@@ -343,7 +343,7 @@ impl LayerNorm {
         dx: &mut [f32],
     ) {
         let c = self.channels;
-        let inv_c = 1.0 / c as f32;
+        let (inv_c, tile) = (1.0 / c as f32, self.tile(hw));
         let mut mean_buf = [0.0f32; MAX_TILE];
         let mut rstd_buf = [0.0f32; MAX_TILE];
         let mut s1_buf = [0.0f32; MAX_TILE];
@@ -353,8 +353,8 @@ impl LayerNorm {
             let dys = &dy[s * c * hw..][..c * hw];
             let dxs = &mut dx[s * c * hw..][..c * hw];
             let ss = &stats[s * hw * 2..][..hw * 2];
-            for p0 in (0..hw).step_by(self.tile(hw)) {
-                let t = self.tile(hw).min(hw - p0);
+            for p0 in (0..hw).step_by(tile) {
+                let t = tile.min(hw - p0);
                 let mean = &mut mean_buf[..t];
                 let rstd = &mut rstd_buf[..t];
                 let s1 = &mut s1_buf[..t];
