@@ -10,7 +10,8 @@
 
 /// Most pixels per tile: the stack accumulators (4 × MAX_TILE f32 in backward) stay in L1.
 const MAX_TILE: usize = 1024;
-/// Pixels per tile where a whole sample does not fit [`WHOLE_SAMPLE_BYTES`].
+/// Pixels per tile where a sample is too large to be one (over [`MAX_TILE`] pixels or
+/// [`WHOLE_SAMPLE_BYTES`]).
 const TILE: usize = 256;
 /// A sample up to this size is one tile: its channel rows are then one contiguous run, which the
 /// hardware prefetcher streams in (the backward reads x back from memory, long after the forward
