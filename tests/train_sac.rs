@@ -29,6 +29,7 @@ fn config(dir: &Path) -> (TrainSacConfig, PathBuf) {
         steps: 16,
         checkpoint_every: 8,
         snapshot_every: None,
+        init: None,
         log_every: 4,
         seed: 11,
     };
@@ -148,6 +149,36 @@ fn a_belief_mode_count_out_of_range_is_refused_by_name() {
         let err = config.check().unwrap_err();
         assert!(err.contains("belief_modes") && err.contains("1 to 16"), "{err}");
     }
+}
+
+/// A run with `init` starts from that policy's networks (critics included, targets copied from
+/// them) and trains on from there; a policy of another network is refused by name.
+#[test]
+fn a_run_starts_from_the_policy_init_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut config, _) = config(dir.path());
+    let (first, _) = train_and_sample(dir.path(), config.clone(), "train_first.ron");
+    let policy = dir.path().join("policy.safetensors");
+    first.agent().learner.nets.save(&policy).unwrap();
+    let trained = first.agent().learner.nets.params.values.clone();
+
+    config.init = Some("policy.safetensors".into());
+    let path = dir.path().join("train_init.ron");
+    let mut tuned = SacTrainer::new(config.clone(), &path).unwrap();
+    let learner = &tuned.agent().learner;
+    assert!(learner.nets.params.values == trained, "the networks are the policy's");
+    assert!(learner.target == trained, "the target critics start as copies of the critics");
+    assert_eq!(learner.alpha(), config.agent.hyper.initial_alpha);
+    let fresh = SacTrainer::new(TrainSacConfig { init: None, ..config.clone() }, &path).unwrap();
+    assert!(fresh.agent().learner.nets.params.values != trained, "without init the networks are fresh");
+    while tuned.step < 12 {
+        tuned.step();
+    }
+    assert!(tuned.agent().updates > 0 && tuned.agent().learner.nets.params.values != trained);
+
+    config.network = "paper".into();
+    let err = format!("{:#}", SacTrainer::new(config, &path).err().unwrap());
+    assert!(err.contains("train_init.ron: init") && err.contains("policy.safetensors"), "{err}");
 }
 
 /// Every training config in `scenes/` parses, passes its checks and builds its trainer (world,

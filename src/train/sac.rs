@@ -14,7 +14,7 @@ use crate::belief::{BELIEF_CHANNELS, BeliefParams};
 use crate::compose::{LoadedScene, Pipeline, Scene, standard_registry};
 use crate::episode::Episode;
 use crate::nn::checkpoint::Checkpoint;
-use crate::nn::sac::{SacLearner, SacNetConfig};
+use crate::nn::sac::{SacLearner, SacNetConfig, SacNetworks};
 use crate::plugin::headless_app;
 use crate::world::RobotRngs;
 use crate::world::rng::stream;
@@ -45,6 +45,13 @@ pub struct TrainSacConfig {
     pub belief_modes: usize,
     #[serde(default)]
     pub agent: SacAgentConfig,
+    /// A policy file (`policy.safetensors` of an earlier run) whose encoders, actor and critics
+    /// the run starts from instead of fresh ones: fine-tuning, e.g. on another task. The target
+    /// critics start as copies of the critics and α at `agent.hyper.initial_alpha`; the network
+    /// must be the one `network`, `depth_columns` and `belief_modes` describe. Relative to the
+    /// config file.
+    #[serde(default)]
+    pub init: Option<PathBuf>,
     /// World steps to train for (each moves every robot once).
     pub steps: u64,
     /// World steps between resumable checkpoints; a multiple of the episode length.
@@ -151,8 +158,29 @@ impl SacTrainer {
             config.systems.display(),
             config.belief_modes
         );
-        let agent =
-            SacAgent::new(&net, config.agent.clone(), robots.len(), episode_steps as usize, config.seed);
+        let nets = match &config.init {
+            None => SacNetworks::new(&net, config.seed),
+            Some(init) => {
+                let init = dir.join(init);
+                let nets = SacNetworks::load(&init).with_context(|| format!("{}: init", path.display()))?;
+                anyhow::ensure!(
+                    nets.config == net,
+                    "{}: init: {} holds a network {:?}, expected the config's {net:?}",
+                    path.display(),
+                    init.display(),
+                    nets.config
+                );
+                nets
+            }
+        };
+        let learner = SacLearner::new(nets, config.agent.hyper.clone());
+        let agent = SacAgent::with_learner(
+            learner,
+            config.agent.clone(),
+            robots.len(),
+            episode_steps as usize,
+            config.seed,
+        );
         let agent = app.world_mut().spawn(agent).id();
         Ok(Self { config, app, robots, agent, episode_steps, step: 0 })
     }
