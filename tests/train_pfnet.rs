@@ -257,6 +257,31 @@ fn train_pfnet_grid_checkpoint_starts_a_grid_and_depth_run() {
     assert!(format!("{e:#}").starts_with("init:"), "{e:#}");
 }
 
+/// `local_map_cell_m` widens `init`'s local map without touching a weight; the crops, and so
+/// the loss, change with it.
+#[test]
+fn train_pfnet_local_map_cell_m_widens_the_window_of_init() {
+    let dir = tempfile::tempdir().unwrap();
+    let init = PfNet::new(PfNetConfig::compact(), 6).unwrap();
+    let narrow = TrainPfNetConfig { init: Some(saved(&init, dir.path(), "init")), ..tiny() };
+    let wide = TrainPfNetConfig { local_map_cell_m: Some(0.18), ..narrow.clone() };
+    let [train, _] = simulate_data(&narrow, |_, _| {}).unwrap();
+    let pool = Workspaces::for_current_pool();
+    let mut losses = vec![];
+    for config in [&narrow, &wide] {
+        let mut state = TrainState::new(config).unwrap();
+        assert_eq!(state.model.params.values, init.params.values, "training starts from `init`");
+        let cell_m = config.local_map_cell_m.unwrap_or(0.1);
+        assert_eq!(state.model.config.local_map.cell_m, cell_m, "the checkpoint will name its pixel");
+        let (mut buffers, mut grads) = (BatchBuffers::default(), GradBuffers::default());
+        losses.push(state.train_step(config, (&train, &[]), &mut buffers, &mut grads, &pool));
+    }
+    assert_ne!(losses[0], losses[1], "the same weights on other crops give another loss");
+
+    let bad = TrainPfNetConfig { local_map_cell_m: Some(0.0), ..narrow };
+    assert_eq!(bad.check().unwrap_err(), "local_map_cell_m: expected 0.01 to 1 m, found 0");
+}
+
 #[test]
 fn collect_is_deterministic_resumable_and_loads_back() {
     use apfn::train::collect::{CollectConfig, Manifest, collect, load_collection};

@@ -3,8 +3,7 @@
 //! every particle of every robot in the world.
 
 use crate::nn::pfnet::{
-    FeatureBank, FeatureCacheSpec, LocalMapSpec, MapView, PfNet, PfNetConfig, Workspaces, crop_local_maps,
-    depth_image,
+    FeatureBank, FeatureCacheSpec, MapView, PfNet, PfNetConfig, Workspaces, crop_local_maps, depth_image,
 };
 use crate::params::{StepParams, expect_param};
 use crate::particles::set::{
@@ -219,7 +218,7 @@ pub fn pfnet_likelihood(
                         &set.x,
                         &set.y,
                         &set.yaw,
-                        &LocalMapSpec::default(),
+                        &model.config.local_map,
                         out,
                     ),
                     MapFeatures::Cached => {
@@ -313,7 +312,7 @@ mod tests {
             POSES.iter().map(|p| p.yaw).collect(),
         );
         let mut maps = vec![0.0; 3 * model.local_map_len()];
-        crop_local_maps(&map_view(&map), &xs, &ys, &yaws, &LocalMapSpec::default(), &mut maps);
+        crop_local_maps(&map_view(&map), &xs, &ys, &yaws, &model.config.local_map, &mut maps);
         // The training path: the joint stage on concatenated features, not the system's split one.
         let loglik = model.forward_steps(obs, (&maps, MapInput::LocalMaps), 1, 3, &mut ws);
         let total: f32 = loglik.iter().map(|l| l.exp()).sum();
@@ -387,6 +386,32 @@ mod tests {
         );
         assert!(weights.iter().all(|&w| (w - 1.0 / 3.0).abs() < 1e-6), "no strip, no update: {weights:?}");
         assert_eq!(stats.updates, 0, "nothing booked for a robot the network cannot see through");
+    }
+
+    /// A checkpoint whose local map has wider pixels is cropped at its own pixel size.
+    #[test]
+    fn pfnet_likelihood_crops_the_local_map_the_checkpoint_names() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("wide.safetensors");
+        let mut model = PfNet::new(PfNetConfig::compact(), 4).unwrap();
+        model.config.local_map.cell_m = 0.18;
+        model.save(&path).unwrap();
+        let mut world = World::new();
+        let checkpoint = Some(path.display().to_string());
+        world.insert_resource(PfNetLikelihoodParams { checkpoint, ..Default::default() });
+        let map = world.spawn(NetworkMap::from_fine(&tiny_room(), 0.1)).id();
+        let robot = world.spawn((grid(0), OnMap(map), ParticleSet::from_poses(&POSES))).id();
+        world.run_system_once(pfnet_likelihood).expect("system runs");
+
+        let weights = world.get::<ParticleSet>(robot).unwrap().weights();
+        let want = expected_weights(&model, &grid(0).values);
+        assert!(weights.iter().zip(&want).all(|(w, e)| (w - e).abs() < 1e-5), "{weights:?} vs {want:?}");
+        model.config.local_map.cell_m = 0.1;
+        let narrow = expected_weights(&model, &grid(0).values);
+        assert!(
+            weights.iter().zip(&narrow).any(|(w, n)| (w - n).abs() > 1e-4),
+            "the 0.1 m crop must weigh differently: {weights:?} vs {narrow:?}"
+        );
     }
 
     #[test]

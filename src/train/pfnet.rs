@@ -12,8 +12,8 @@ use crate::compose::{LoadedScene, Pipeline, Scene, standard_registry};
 use crate::nn::adam::{Adam, AdamConfig};
 use crate::nn::checkpoint::Checkpoint;
 use crate::nn::pfnet::{
-    FeatureBank, FeatureCacheSpec, GradBuffers, LocalMapSpec, MapInput, Observation, PfNet, PfNetConfig,
-    PoseLoss, StepBatch, Workspaces, crop_local_maps, depth_image,
+    FeatureBank, FeatureCacheSpec, GradBuffers, MapInput, Observation, PfNet, PfNetConfig, PoseLoss,
+    StepBatch, Workspaces, crop_local_maps, depth_image,
 };
 use crate::particles::{MapFeatures, map_view};
 use crate::train::collect::load_collection;
@@ -97,6 +97,11 @@ pub struct TrainPfNetConfig {
     pub features: MapFeatures,
     /// The banks' orientations (as `pfnet_likelihood`'s `cache`), with `features: cached`.
     pub cache: FeatureCacheSpec,
+    /// Side of a local-map pixel, replacing the network's (paper: 0.1 m). Its 28 pixels see
+    /// 2.8 m of map where the LiDAR grid spans 5 m, so in open halls the map window often holds
+    /// no wall the scan shows; 0.18 m makes the two windows one. The pixel count stays, so
+    /// `init`'s weights still fit. Default: the network's.
+    pub local_map_cell_m: Option<f32>,
 }
 
 /// `episodes` goalnav episodes on `maps` seen apartments of shape `apartment`.
@@ -137,6 +142,7 @@ impl Default for TrainPfNetConfig {
             init: None,
             features: MapFeatures::Exact,
             cache: FeatureCacheSpec::default(),
+            local_map_cell_m: None,
         }
     }
 }
@@ -198,6 +204,11 @@ impl TrainPfNetConfig {
         }
         if !(1..=360).contains(&self.cache.orientations) {
             return Err(format!("cache.orientations: expected 1 to 360, found {}", self.cache.orientations));
+        }
+        if let Some(cell_m) = self.local_map_cell_m
+            && !(0.01..=1.0).contains(&cell_m)
+        {
+            return Err(format!("local_map_cell_m: expected 0.01 to 1 m, found {cell_m}"));
         }
         PfNetConfig::named(&self.network)
             .map(|_| ())
@@ -382,7 +393,7 @@ impl BatchBuffers {
                 match config.features {
                     MapFeatures::Exact => {
                         let map = map_view(&data.maps[episode.map]);
-                        crop_local_maps(&map, &xs, &ys, &yaws, &LocalMapSpec::default(), out)
+                        crop_local_maps(&map, &xs, &ys, &yaws, &model.config.local_map, out)
                     }
                     MapFeatures::Cached => banks[episode.map].crop_features(&xs, &ys, &yaws, out),
                 }
@@ -453,13 +464,20 @@ const ADAM_V: &str = "adam.v/";
 impl TrainState {
     /// Fresh weights from the seed, or `config.init`'s (which must be of `config.network`).
     pub fn new(config: &TrainPfNetConfig) -> anyhow::Result<Self> {
-        let network = PfNetConfig::named(&config.network).expect("checked").observing(config.observation);
+        let mut network = PfNetConfig::named(&config.network).expect("checked").observing(config.observation);
+        if let Some(cell_m) = config.local_map_cell_m {
+            network.local_map.cell_m = cell_m;
+        }
         let model = match &config.init {
             None => PfNet::new(network, config.seed).map_err(anyhow::Error::msg)?,
             Some(path) => {
                 let model = PfNet::load(Path::new(path)).with_context(|| format!("init: {path}"))?;
-                let model =
+                let mut model =
                     model.widened_to(config.observation).map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
+                // A pixel's size is in no weight: the same filters read a wider window.
+                if let Some(cell_m) = config.local_map_cell_m {
+                    model.config.local_map.cell_m = cell_m;
+                }
                 anyhow::ensure!(
                     model.config == network,
                     "init: {path} holds another network than `network: {}` observing `{}`",
