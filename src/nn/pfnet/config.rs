@@ -176,6 +176,9 @@ impl PfNetConfig {
                 self.local_map.cells, self.obs_cells
             ));
         }
+        if !(0.01..=1.0).contains(&self.local_map.cell_m) {
+            return Err(format!("local_map.cell_m: expected 0.01 to 1 m, found {}", self.local_map.cell_m));
+        }
         if self.joint_filters == 0 || self.layer_norm_eps <= 0.0 {
             return Err("joint_filters, layer_norm_eps: expected ≥ 1 and > 0".into());
         }
@@ -205,6 +208,14 @@ mod tests {
             let err = config.check().unwrap_err();
             assert!(err.starts_with("local_map.cells, obs_cells: expected"), "unhelpful error: {err}");
             assert!(err.contains(&format!("found {cells} and {obs_cells}")), "{err}");
+        }
+        for cell_m in [0.0, f32::NAN, 2.0] {
+            let mut config = PfNetConfig::compact();
+            config.local_map.cell_m = cell_m;
+            assert_eq!(
+                config.check().unwrap_err(),
+                format!("local_map.cell_m: expected 0.01 to 1 m, found {cell_m}")
+            );
         }
     }
 }
