@@ -12,8 +12,8 @@ use crate::compose::{LoadedScene, Pipeline, Scene, standard_registry};
 use crate::nn::adam::{Adam, AdamConfig};
 use crate::nn::checkpoint::Checkpoint;
 use crate::nn::pfnet::{
-    FeatureBank, FeatureCacheSpec, GradBuffers, MapInput, Observation, PfNet, PfNetConfig, PoseLoss,
-    StepBatch, Workspaces, crop_local_maps, depth_image,
+    FeatureBank, FeatureCacheSpec, GradBuffers, LocalMapSpec, MapInput, Observation, PfNet, PfNetConfig,
+    PoseLoss, StepBatch, Workspaces, crop_local_maps, depth_image,
 };
 use crate::particles::{MapFeatures, map_view};
 use crate::train::collect::load_collection;
@@ -206,10 +206,8 @@ impl TrainPfNetConfig {
         if !(1..=360).contains(&self.cache.orientations) {
             return Err(format!("cache.orientations: expected 1 to 360, found {}", self.cache.orientations));
         }
-        if let Some(cell_m) = self.local_map_cell_m
-            && !(0.01..=1.0).contains(&cell_m)
-        {
-            return Err(format!("local_map_cell_m: expected 0.01 to 1 m, found {cell_m}"));
+        if let Some(cell_m) = self.local_map_cell_m {
+            LocalMapSpec::check_cell_m("local_map_cell_m", cell_m)?;
         }
         PfNetConfig::named(&self.network)
             .map(|_| ())

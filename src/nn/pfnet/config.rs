@@ -176,9 +176,7 @@ impl PfNetConfig {
                 self.local_map.cells, self.obs_cells
             ));
         }
-        if !(0.01..=1.0).contains(&self.local_map.cell_m) {
-            return Err(format!("local_map.cell_m: expected 0.01 to 1 m, found {}", self.local_map.cell_m));
-        }
+        LocalMapSpec::check_cell_m("local_map.cell_m", self.local_map.cell_m)?;
         if self.joint_filters == 0 || self.layer_norm_eps <= 0.0 {
             return Err("joint_filters, layer_norm_eps: expected ≥ 1 and > 0".into());
         }

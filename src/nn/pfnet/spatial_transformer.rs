@@ -66,6 +66,16 @@ impl Default for LocalMapSpec {
     }
 }
 
+impl LocalMapSpec {
+    /// Checks a pixel side for `field`: 0.01–1 m.
+    pub fn check_cell_m(field: &str, cell_m: f32) -> Result<(), String> {
+        match (0.01..=1.0).contains(&cell_m) {
+            true => Ok(()),
+            false => Err(format!("{field}: expected 0.01 to 1 m, found {cell_m}")),
+        }
+    }
+}
+
 /// Where a pose's pixels sample the map, in *centre coordinates* (grid coordinates − 0.5, so cell
 /// (i, j)'s centre sits at the integers (i, j) and bilinear weights are plain fractions).
 struct SamplePlan {
