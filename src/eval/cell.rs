@@ -122,6 +122,7 @@ pub fn run_cell(eval: &LoadedEval, cell: &CellSpec, on_step: impl Fn()) -> Resul
     let init = InitParams {
         task: cell.task,
         particles: eval.config.particles.or(schedule_init.particles),
+        mix: Vec::new(),
         ..schedule_init
     };
     let particles = init.particle_count();

@@ -64,6 +64,10 @@ pub struct InitParams {
     pub tracking_sigma_deg: f32,
     /// Side of the semi-global box centred on the guess, metres (paper text: 3.3; authors' code: 2.1).
     pub semi_global_box_m: f32,
+    /// Training on several tasks at once: when not empty, every fresh set draws its task
+    /// uniformly from this list with the robot's filter RNG (repeat a task to weigh it more), and
+    /// `task` is unused. Evaluation cells name their task, so they clear it. Default: empty.
+    pub mix: Vec<Task>,
 }
 
 impl Default for InitParams {
@@ -74,6 +78,7 @@ impl Default for InitParams {
             tracking_sigma_m: 0.3,
             tracking_sigma_deg: 30.0,
             semi_global_box_m: 3.3,
+            mix: Vec::new(),
         }
     }
 }
@@ -92,6 +97,17 @@ impl StepParams for InitParams {
 impl InitParams {
     pub fn particle_count(&self) -> usize {
         self.particles.unwrap_or(self.task.default_particles())
+    }
+
+    /// These parameters for one fresh set: `mix` resolved to one task drawn from it, or `None`
+    /// when there is no mix (use `self` as it is; nothing is drawn, so runs without a mix keep
+    /// their random streams).
+    fn drawn_from_mix(&self, rng: &mut impl Rng) -> Option<InitParams> {
+        if self.mix.is_empty() {
+            return None;
+        }
+        let task = self.mix[rng.random_range(0..self.mix.len())];
+        Some(InitParams { task, mix: Vec::new(), ..self.clone() })
     }
 }
 
@@ -236,9 +252,11 @@ pub fn init_particles(
             tracing::warn!("init_particles: map {:?} has no OccupancyMap + TraversableMap", on_map.0);
             continue;
         };
+        let mixed = params.drawn_from_mix(&mut rng.0);
+        let params = mixed.as_ref().unwrap_or(&params);
         let drawn = match told {
-            Some(guess) => draw_around_guess(&params, Some(guess.0), map, traversable, &mut rng.0),
-            None => draw_initial_set(&params, &truth.0, map, traversable, &mut rng.0),
+            Some(guess) => draw_around_guess(params, Some(guess.0), map, traversable, &mut rng.0),
+            None => draw_initial_set(params, &truth.0, map, traversable, &mut rng.0),
         };
         match drawn {
             Ok(init) => {
@@ -304,6 +322,35 @@ mod tests {
         assert_eq!(world.get::<ParticleSet>(running), Some(&kept), "unmarked sets are left alone");
         world.run_system_once(init_particles).expect("init_particles runs");
         assert_eq!(world.get::<ParticleSet>(marked), Some(&filled), "drawn once per mark");
+    }
+
+    #[test]
+    fn init_particles_draws_each_fresh_set_s_task_from_the_mix() {
+        let mut world = World::new();
+        let mix = vec![Task::SemiGlobal, Task::Global];
+        world.insert_resource(InitParams { mix, ..Default::default() });
+        let map = tiny_room();
+        let traversable = free_cells(&map);
+        let m = world.spawn((map, traversable)).id();
+        let truth = TruePose(Pose2::new(1.0, 0.5, 0.0));
+        let robots: Vec<Entity> = (0..16)
+            .map(|seed| {
+                world
+                    .spawn((truth, OnMap(m), ParticleSet::default(), FilterRng::seeded(seed), NeedsInit))
+                    .id()
+            })
+            .collect();
+        world.run_system_once(init_particles).expect("init_particles runs");
+        let sizes: Vec<usize> = robots.iter().map(|&r| world.get::<ParticleSet>(r).unwrap().len()).collect();
+        assert!(sizes.iter().all(|&n| n == 500 || n == 3000), "each set is one task's default: {sizes:?}");
+        assert!(sizes.contains(&500) && sizes.contains(&3000), "16 draws of 2 tasks give both: {sizes:?}");
+        let replay = InitParams { mix: vec![Task::SemiGlobal, Task::Global], ..Default::default() };
+        let first_task = replay.drawn_from_mix(&mut FilterRng::seeded(0).0).expect("a mix").task;
+        assert_eq!(sizes[0], first_task.default_particles(), "the draw comes from the robot's filter RNG");
+        assert!(
+            InitParams::default().drawn_from_mix(&mut FilterRng::seeded(0).0).is_none(),
+            "no mix, no draw"
+        );
     }
 
     #[test]
