@@ -1,7 +1,7 @@
 //! The standard registry: every system apfn ships, in dataflow order. A new system (a learned
 //! likelihood, a belief projection, an agent) joins by adding one `register` call here.
 
-use crate::act::{Collided, DriveCommand, drive, physics};
+use crate::act::{BumpShieldParams, Collided, DriveCommand, bump_shield, drive, physics};
 use crate::agent::sac::{
     Reward, RewardParams, SacPolicyParams, SacUpdateParams, localization_reward, sac_policy, sac_update,
 };
@@ -243,6 +243,16 @@ pub fn standard_registry() -> Registry {
     .register::<NoParams, _, _>(
         spec("drive", Act, "Reads Action, RobotParams. Writes DriveCommand.", data![Action], data![DriveCommand]),
         drive,
+    )
+    .register::<BumpShieldParams, _, _>(
+        spec(
+            "bump_shield",
+            Act,
+            "Reads LidarScan, DriveCommand, RobotParams, PhysicsParams. Writes DriveCommand (forward speed cut so the step's sweep stays clear of the scan).",
+            data![LidarScan, DriveCommand],
+            data![DriveCommand],
+        ),
+        bump_shield,
     )
     .register::<NoParams, _, _>(
         spec(
