@@ -45,29 +45,32 @@ fn scan_points(scan: &LidarScan) -> impl Iterator<Item = Vec2> + '_ {
     )
 }
 
+/// How far the nearest scanned point may come below the robot's present nearest when it is
+/// already inside the clearance, metres: the scan samples a wall at discrete rays, so driving
+/// along a wall finds points a little nearer than the one it started from.
+const ALONG_WALL_TOLERANCE_M: f32 = 0.02;
+
+/// Nearest distance from `position` to any of `points` (∞ without points).
+fn nearest(points: &[Vec2], position: Vec2) -> f32 {
+    points.iter().map(|q| position.distance(*q)).fold(f32::INFINITY, f32::min)
+}
+
 /// Whether holding `command` for `substeps` steps of `dt_s` (the physics' integration: the
-/// velocity re-aimed along the heading before each step) brings the body's centre nearer than
-/// `clearance_m` to a point it is approaching. Points already within the clearance only block
-/// motion toward them, so a robot against a wall can still back or turn away.
-fn sweeps_into(points: &[Vec2], command: DriveCommand, dt_s: f32, substeps: u32, clearance_m: f32) -> bool {
+/// velocity re-aimed along the heading before each step) brings the body's centre nearer to a
+/// scanned point than `floor_m`.
+fn sweeps_into(points: &[Vec2], command: DriveCommand, dt_s: f32, substeps: u32, floor_m: f32) -> bool {
     let (mut position, mut heading) = (Vec2::ZERO, 0.0f32);
-    for _ in 0..substeps {
+    (0..substeps).any(|_| {
         position += Vec2::from_angle(heading) * command.linear_mps * dt_s;
         heading += command.angular_radps * dt_s;
-        let hits = |q: &Vec2| {
-            let d = position.distance(*q);
-            d < clearance_m && d < q.length()
-        };
-        if points.iter().any(hits) {
-            return true;
-        }
-    }
-    false
+        nearest(points, position) < floor_m
+    })
 }
 
 /// The command with its forward speed cut to the fastest of `speed_steps` equal fractions whose
-/// sweep stays clear of `points`; a stop with the same turn when none does (a disc turning in
-/// place touches nothing new).
+/// sweep keeps `clearance_m` from every point of `points`, or, when the robot is already nearer
+/// than that, comes no nearer than it is (so it can drive along or away from a wall it is close
+/// to); a stop with the same turn when none does (a disc turning in place touches nothing new).
 pub fn shielded(
     command: DriveCommand,
     points: &[Vec2],
@@ -75,12 +78,14 @@ pub fn shielded(
     clearance_m: f32,
     speed_steps: u32,
 ) -> DriveCommand {
+    let now = nearest(points, Vec2::ZERO);
+    let floor_m = if now < clearance_m { now - ALONG_WALL_TOLERANCE_M } else { clearance_m };
     (0..speed_steps)
         .map(|k| DriveCommand {
             linear_mps: command.linear_mps * (speed_steps - k) as f32 / speed_steps as f32,
             ..command
         })
-        .find(|c| !sweeps_into(points, *c, physics.dt_s, physics.substeps, clearance_m))
+        .find(|c| !sweeps_into(points, *c, physics.dt_s, physics.substeps, floor_m))
         .unwrap_or(DriveCommand { linear_mps: 0.0, ..command })
 }
 
@@ -104,6 +109,10 @@ pub fn bump_shield(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::act::MapPhysics;
+    use crate::sense::{LidarParams, RayGrid, cast_scan};
+    use crate::testing::tiny_room;
+    use crate::world::Pose2;
     use bevy::ecs::system::RunSystemOnce;
 
     /// A 360° scan of 360 rays that sees a wall `d` metres ahead (rays within ±60° of the
@@ -161,6 +170,51 @@ mod tests {
         assert_eq!(c, DriveCommand { linear_mps: 0.0, angular_radps: 1.0 }, "no further push, turn kept");
         let back = DriveCommand { linear_mps: -0.5, angular_radps: 0.0 };
         assert_eq!(run(touching, back), back, "moving away from a point is never blocked");
+    }
+
+    #[test]
+    fn bump_shield_lets_a_robot_drive_along_a_wall_it_is_close_to() {
+        // A wall 0.2 m to the right, parallel to the heading: inside the 0.23 m clearance, but
+        // driving along it comes no nearer.
+        let mut scan = wall_ahead(1.0);
+        for (i, r) in scan.ranges_m.iter_mut().enumerate() {
+            let angle = scan.angle_min_rad + i as f32 * scan.angle_increment_rad;
+            *r = if angle.sin() < -0.05 { (-0.2 / angle.sin()).min(5.6) } else { 5.6 };
+        }
+        assert_eq!(run(scan, FULL_AHEAD), FULL_AHEAD);
+    }
+
+    /// Drives `command` for `steps` agent steps in the tiny room from `start`, each shielded on
+    /// a fresh LiDAR scan; returns the final pose and whether the physics ever flagged a touch.
+    fn drive_shielded(start: Pose2, command: DriveCommand, steps: usize) -> (Pose2, bool) {
+        let map = tiny_room();
+        let (grid, physics) = (RayGrid::from_map(&map), PhysicsParams::default());
+        let mut world = MapPhysics::from_map(&map, physics.dt_s);
+        let robot = world.add_robot(start, RobotParams::default().radius_m, false);
+        let (mut pose, mut touched, mut scan) = (start, false, LidarScan::default());
+        let clearance = RobotParams::default().radius_m + BumpShieldParams::default().margin_m;
+        for _ in 0..steps {
+            cast_scan(&grid, pose, &[], &LidarParams::default(), &mut scan);
+            let points: Vec<Vec2> = scan_points(&scan).collect();
+            let safe = shielded(command, &points, &physics, clearance, 8);
+            let [(next, hit)] = world.step_robots(&[(robot, safe)], physics.substeps)[..] else {
+                unreachable!()
+            };
+            (pose, touched) = (next, touched || hit);
+        }
+        (pose, touched)
+    }
+
+    #[test]
+    fn bump_shield_keeps_the_physics_from_flagging_a_collision() {
+        // Facing the tiny room's east wall (inner face at x = 1.9 m) from 0.3 m away: unshielded,
+        // two steps at full speed hit it (`physics_flags_collision_when_driving_into_a_wall`).
+        let (pose, touched) = drive_shielded(Pose2::new(1.6, 0.3, 0.0), FULL_AHEAD, 3);
+        assert!(!touched, "the shield must stop short of the wall, ended at {pose:?}");
+        assert!(pose.x > 1.6 + 0.03, "it still closes in before stopping, ended at x = {}", pose.x);
+        // Along the south wall (face at y = 0.1 m), 5 cm clear: full speed all the way.
+        let (pose, touched) = drive_shielded(Pose2::new(0.4, 0.1 + 0.18 + 0.05, 0.0), FULL_AHEAD, 2);
+        assert!(!touched && (pose.x - 1.0).abs() < 0.03, "two free steps of 0.3 m, ended at {pose:?}");
     }
 
     #[test]
