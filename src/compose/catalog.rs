@@ -230,7 +230,7 @@ pub fn standard_registry() -> Registry {
         spec(
             "sac_policy",
             Agent,
-            "Reads BeliefCrop, LocalGrid, Collided, Episode, Reward, the learning agent if any. Writes Action, the agent's replay buffer.",
+            "Reads BeliefCrop, LocalGrid, Collided, Episode, Reward, the learning agent if any, ScenarioRng (with `sample`). Writes Action, the agent's replay buffer.",
             data![BeliefCrop, LocalGrid, Reward],
             data![Action],
         ),

@@ -1,6 +1,7 @@
 //! `sac_policy`: one batched actor forward pass for every robot in the world. With a learning
 //! agent in the world it samples actions (uniformly at random while warming up) and stores each
-//! robot's transitions; otherwise it acts deterministically, tanh(μ), with a policy checkpoint.
+//! robot's transitions; otherwise it acts with a policy checkpoint, deterministically, tanh(μ),
+//! or, with `sample`, by drawing from the policy as training does.
 
 use crate::act::Collided;
 use crate::agent::Action;
@@ -14,7 +15,7 @@ use crate::episode::{Episode, EpisodeEnd, EpisodeParams};
 use crate::nn::sac::{ACTION_LEN, Observations, PolicyWorkspace, STATE_LEN, SacNetworks};
 use crate::params::StepParams;
 use crate::sense::{DepthParams, DepthStrip, LocalGrid};
-use crate::world::{RobotId, in_id_order};
+use crate::world::{RobotId, ScenarioRng, in_id_order};
 use bevy::prelude::*;
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -29,6 +30,11 @@ pub struct SacPolicyParams {
     /// A policy written by `apfn train-sac` (safetensors), relative to the working directory.
     /// Unused while a learning agent is in the world (training acts with its live networks).
     pub checkpoint: Option<String>,
+    /// Draw each action from the tanh-Gaussian policy with the robot's scenario RNG instead of
+    /// taking tanh(μ) (default false, the deterministic actions SAC is evaluated with). A policy
+    /// that sees only its present observation can loop where its observations repeat; drawn
+    /// actions break such loops (Singh, Jaakkola & Jordan 1994).
+    pub sample: bool,
 }
 
 impl StepParams for SacPolicyParams {
@@ -82,11 +88,12 @@ type RobotView<'a> = (
     Has<EpisodeEnd>,
     &'a Reward,
     &'a mut Action,
+    Option<&'a mut ScenarioRng>,
 );
 
 /// Reads BeliefCrop, LocalGrid, DepthStrip (when the network reads one), Collided, Episode,
-/// EpisodeEnd, Reward, the last Action, RobotId (the batch order), the learning agent (if any).
-/// Writes Action; with a learning agent, its replay buffer.
+/// EpisodeEnd, Reward, the last Action, RobotId (the batch order), the learning agent (if any),
+/// ScenarioRng (with `sample`). Writes Action; with a learning agent, its replay buffer.
 pub fn sac_policy(
     params: Res<SacPolicyParams>,
     episode: Res<EpisodeParams>,
@@ -121,7 +128,7 @@ pub fn sac_policy(
     state.states.resize(n * sl, 0.0);
     state.obs_ids.clear();
     for (k, &robot) in state.robots.iter().enumerate() {
-        let (_, crop, grid, depth, collided, ep, is_end, reward, action) =
+        let (_, crop, grid, depth, collided, ep, is_end, reward, action, _) =
             robots.get(robot).expect("listed above");
         let row = &mut state.states[k * sl..(k + 1) * sl];
         row[..STATE_LEN].copy_from_slice(&robot_state(action, collided.0, ep, episode.steps));
@@ -159,11 +166,20 @@ pub fn sac_policy(
             agent.learner.nets.act(&obs, Some(&state.noise), &mut state.ws, &mut state.actions);
         }
         None => {
-            state.loaded.as_ref().expect("loaded above").act(&obs, None, &mut state.ws, &mut state.actions)
+            let noise = params.sample.then(|| {
+                state.noise.clear();
+                for &robot in &state.robots {
+                    let rng = robots.get_mut(robot).expect("listed above").9;
+                    let mut rng = rng.expect("sac_policy samples with each robot's ScenarioRng");
+                    state.noise.extend((0..ACTION_LEN).map(|_| rng.0.sample::<f32, _>(StandardNormal)));
+                }
+                &state.noise[..]
+            });
+            state.loaded.as_ref().expect("loaded above").act(&obs, noise, &mut state.ws, &mut state.actions)
         }
     }
     for (k, &robot) in state.robots.iter().enumerate() {
-        let (.., is_end, _, mut action) = robots.get_mut(robot).expect("listed above");
+        let (.., is_end, _, mut action, _) = robots.get_mut(robot).expect("listed above");
         let a = [state.actions[2 * k], state.actions[2 * k + 1]];
         *action = Action::new(a[0], a[1]);
         if let Some(agent) = agent.as_deref_mut()
@@ -270,16 +286,16 @@ mod tests {
     }
 
     #[test]
-    fn a_checkpoint_policy_acts_deterministically_and_a_bad_path_is_named() {
+    fn a_checkpoint_policy_acts_deterministically_or_samples_and_a_bad_path_is_named() {
         let nets = SacNetworks::new(&tiny(), 3);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("policy.safetensors");
         nets.save(&path).unwrap();
-        let params = SacPolicyParams { checkpoint: Some(path.display().to_string()) };
+        let params = SacPolicyParams { checkpoint: Some(path.display().to_string()), sample: false };
         assert_eq!(params.check(), Ok(()));
-        let run = || {
+        let run = |sample: bool, seed: u64| {
             let mut world = World::new();
-            world.insert_resource(params.clone());
+            world.insert_resource(SacPolicyParams { sample, ..params.clone() });
             world.insert_resource(EpisodeParams::default());
             let crop = BeliefCrop {
                 cells: 5,
@@ -288,11 +304,18 @@ mod tests {
             };
             let grid = LocalGrid { cells: 5, values: vec![0.5; 25] };
             let robot = spawn_robot(&mut world, crop, grid);
+            world.entity_mut(robot).insert(ScenarioRng::seeded(seed));
             world.run_system_once(sac_policy).unwrap();
             *world.get::<Action>(robot).unwrap()
         };
-        assert_eq!(run(), run(), "evaluation actions are tanh(μ), no noise");
-        let missing = SacPolicyParams { checkpoint: Some("no/such/policy.safetensors".into()) };
+        assert_eq!(run(false, 1), run(false, 2), "evaluation actions are tanh(μ), no noise");
+        let drawn = run(true, 1);
+        assert_eq!(drawn, run(true, 1), "a drawn action is the robot's RNG's");
+        assert_ne!(drawn, run(true, 2), "another seed, another draw");
+        assert_ne!(drawn, run(false, 1), "a draw is not the mean action");
+        assert!(drawn.linear.abs() <= 1.0 && drawn.angular.abs() <= 1.0, "drawn actions stay in [−1, 1]");
+        let missing =
+            SacPolicyParams { checkpoint: Some("no/such/policy.safetensors".into()), sample: false };
         assert!(missing.check().unwrap_err().contains("no/such/policy.safetensors"));
     }
 
