@@ -2,7 +2,8 @@
 //! agent step against the LiDAR scan taken at its start and slows the forward speed, keeping the
 //! turn, until the swept disc stays clear of every scanned point. A learned policy that
 //! misjudges where it is (its belief crop shows the wrong room) would otherwise push into walls
-//! its own LiDAR sees.
+//! its own LiDAR sees. What the LiDAR does not cover (the rear 120° of the paper's 240° sensor) is
+//! not guarded. For the APFN agent it costs localization (docs/results/sac_shield/).
 
 use crate::act::drive::DriveCommand;
 use crate::act::physics::PhysicsParams;
@@ -12,6 +13,7 @@ use crate::world::RobotParams;
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
 
+/// The clearance `bump_shield` keeps and how finely it cuts the speed.
 #[derive(Resource, Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct BumpShieldParams {
