@@ -32,8 +32,9 @@ pub struct SacPolicyParams {
     pub checkpoint: Option<String>,
     /// Draw each action from the tanh-Gaussian policy with the robot's scenario RNG instead of
     /// taking tanh(μ) (default false, the deterministic actions SAC is evaluated with). A policy
-    /// that sees only its present observation can loop where its observations repeat; drawn
-    /// actions break such loops (Singh, Jaakkola & Jordan 1994).
+    /// that sees only its present observation can loop where its observations repeat, and
+    /// drawn actions can break such loops (Singh, Jaakkola & Jordan 1994); for the shipped
+    /// global agent they did not help (docs/results/sac_sampled/).
     pub sample: bool,
 }
 
