@@ -170,9 +170,19 @@ pub fn sac_policy(
             let noise = params.sample.then(|| {
                 state.noise.clear();
                 for &robot in &state.robots {
-                    let rng = robots.get_mut(robot).expect("listed above").9;
-                    let mut rng = rng.expect("sac_policy samples with each robot's ScenarioRng");
-                    state.noise.extend((0..ACTION_LEN).map(|_| rng.0.sample::<f32, _>(StandardNormal)));
+                    // Zero noise is tanh(μ): a robot spawned without a ScenarioRng acts deterministically.
+                    match robots.get_mut(robot).expect("listed above").9 {
+                        Some(mut rng) => state
+                            .noise
+                            .extend((0..ACTION_LEN).map(|_| rng.0.sample::<f32, _>(StandardNormal))),
+                        None => {
+                            if !state.warned {
+                                tracing::warn!("sac_policy: sample needs each robot's ScenarioRng; {robot:?} has none and acts by tanh(μ)");
+                                state.warned = true;
+                            }
+                            state.noise.extend([0.0; ACTION_LEN]);
+                        }
+                    }
                 }
                 &state.noise[..]
             });
@@ -294,7 +304,8 @@ mod tests {
         nets.save(&path).unwrap();
         let params = SacPolicyParams { checkpoint: Some(path.display().to_string()), sample: false };
         assert_eq!(params.check(), Ok(()));
-        let run = |sample: bool, seed: u64| {
+        // `seed: None` spawns the robot without a ScenarioRng.
+        let run = |sample: bool, seed: Option<u64>| {
             let mut world = World::new();
             world.insert_resource(SacPolicyParams { sample, ..params.clone() });
             world.insert_resource(EpisodeParams::default());
@@ -305,16 +316,19 @@ mod tests {
             };
             let grid = LocalGrid { cells: 5, values: vec![0.5; 25] };
             let robot = spawn_robot(&mut world, crop, grid);
-            world.entity_mut(robot).insert(ScenarioRng::seeded(seed));
+            if let Some(seed) = seed {
+                world.entity_mut(robot).insert(ScenarioRng::seeded(seed));
+            }
             world.run_system_once(sac_policy).unwrap();
             *world.get::<Action>(robot).unwrap()
         };
-        assert_eq!(run(false, 1), run(false, 2), "evaluation actions are tanh(μ), no noise");
-        let drawn = run(true, 1);
-        assert_eq!(drawn, run(true, 1), "a drawn action is the robot's RNG's");
-        assert_ne!(drawn, run(true, 2), "another seed, another draw");
-        assert_ne!(drawn, run(false, 1), "a draw is not the mean action");
+        assert_eq!(run(false, Some(1)), run(false, Some(2)), "evaluation actions are tanh(μ), no noise");
+        let drawn = run(true, Some(1));
+        assert_eq!(drawn, run(true, Some(1)), "a drawn action is the robot's RNG's");
+        assert_ne!(drawn, run(true, Some(2)), "another seed, another draw");
+        assert_ne!(drawn, run(false, Some(1)), "a draw is not the mean action");
         assert!(drawn.linear.abs() <= 1.0 && drawn.angular.abs() <= 1.0, "drawn actions stay in [−1, 1]");
+        assert_eq!(run(true, None), run(false, Some(1)), "no ScenarioRng: tanh(μ), no panic");
         let missing =
             SacPolicyParams { checkpoint: Some("no/such/policy.safetensors".into()), sample: false };
         assert!(missing.check().unwrap_err().contains("no/such/policy.safetensors"));
