@@ -1,7 +1,8 @@
 //! One decision of the information-gain policy (`agent::score_candidates` with the default
 //! `InfogainParams`: 10 primitives × 2 steps × 8 hypotheses × 200 particles × 24 beams) for one
 //! robot on procedural apartment 0, on one core (a one-thread rayon pool), for the global task's
-//! 3,000-particle belief: fresh (uniform) and after one likelihood-field update (multi-modal).
+//! 3,000-particle belief: fresh (uniform) and after one likelihood-field update (multi-modal),
+//! and the latter with 8 reach plans of 6 steps added to the primitives.
 //! The budget is 10 ms per robot and step.
 //!
 //! `cargo bench --bench infogain -- --warm-up-time 1 --measurement-time 3`
@@ -47,15 +48,20 @@ fn bench(c: &mut Criterion) {
         robot: &robot,
         physics: &physics,
     };
-    let params = InfogainParams::default();
+    let primitives = InfogainParams::default();
+    let reach = InfogainParams { reach_headings: 8, ..Default::default() };
     let one_core = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("thread pool");
     let mut group = c.benchmark_group("infogain");
-    for (name, set) in [("global_3000_fresh", &fresh), ("global_3000_after_update", &updated)] {
+    for (name, set, params) in [
+        ("global_3000_fresh", &fresh, &primitives),
+        ("global_3000_after_update", &updated, &primitives),
+        ("global_3000_after_update_reach_8", &updated, &reach),
+    ] {
         group.bench_function(name, |b| {
             let mut key = 0u64;
             b.iter(|| {
                 key += 1;
-                one_core.install(|| black_box(score_candidates(set, view, models, &params, key)).is_ok())
+                one_core.install(|| black_box(score_candidates(set, view, models, params, key)).is_ok())
             })
         });
     }

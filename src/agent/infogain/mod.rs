@@ -4,6 +4,7 @@
 
 mod entropy;
 mod params;
+mod plans;
 mod policy;
 mod predict;
 

@@ -19,6 +19,12 @@ pub struct InfogainParams {
     /// Agent steps each primitive is imagined for, with one predicted scan per step (1–3;
     /// default 2: 1.2 s, up to 0.6 m ahead at top speed, far enough to reach past a corner).
     pub horizon_steps: u32,
+    /// Reach plans (`plans.rs`): directions, evenly spread from straight ahead, each a plan that
+    /// turns toward it and drives straight on, imagined `reach_steps` agent steps with one scan at
+    /// its end (default 0: primitives only, as every committed table).
+    pub reach_headings: usize,
+    /// Agent steps each reach plan is imagined for (1–20; default 6: 3.6 s, up to 1.8 m).
+    pub reach_steps: u32,
     /// Imagined true poses H, drawn from the belief by weight (systematic draw; default 8).
     pub hypotheses: usize,
     /// Particles of the belief drawn by weight (systematic draw) and weighed against each
@@ -67,6 +73,8 @@ impl Default for InfogainParams {
                 (-0.5, 1.0),
             ],
             horizon_steps: 2,
+            reach_headings: 0,
+            reach_steps: 6,
             hypotheses: 8,
             particles: 200,
             beams: 24,
@@ -89,6 +97,8 @@ impl StepParams for InfogainParams {
             "normalised actions with both parts in [−1, 1]",
         )?;
         expect_param((1..=3).contains(&self.horizon_steps), "horizon_steps", "1, 2 or 3 agent steps")?;
+        expect_param(self.reach_headings <= 64, "reach_headings", "at most 64 directions")?;
+        expect_param((1..=20).contains(&self.reach_steps), "reach_steps", "1 to 20 agent steps")?;
         expect_param(self.hypotheses > 0, "hypotheses", "at least 1 imagined pose")?;
         crate::limits::PARTICLES.check("particles", self.particles)?;
         crate::limits::BEAMS.check("beams", self.beams)?;
@@ -130,6 +140,8 @@ mod tests {
         bad(InfogainParams { candidates: vec![], ..Default::default() }, "candidates");
         bad(InfogainParams { candidates: vec![(1.5, 0.0)], ..Default::default() }, "candidates");
         bad(InfogainParams { horizon_steps: 4, ..Default::default() }, "horizon_steps");
+        bad(InfogainParams { reach_headings: 65, ..Default::default() }, "reach_headings");
+        bad(InfogainParams { reach_steps: 0, ..Default::default() }, "reach_steps");
         bad(InfogainParams { hypotheses: 0, ..Default::default() }, "hypotheses");
         bad(InfogainParams { particles: 0, ..Default::default() }, "particles");
         bad(InfogainParams { beams: 0, ..Default::default() }, "beams");

@@ -83,8 +83,18 @@ mod tests {
     /// A robot on `map` with a belief of `modes` (each `per_mode` particles, σ 3 cm / 2°), in a
     /// world with the policy's resources; returns the action the policy writes.
     fn decide(map: OccupancyMap, lidar: LidarParams, modes: &[Pose2], per_mode: usize) -> Action {
+        decide_with(InfogainParams::default(), map, lidar, modes, per_mode)
+    }
+
+    fn decide_with(
+        params: InfogainParams,
+        map: OccupancyMap,
+        lidar: LidarParams,
+        modes: &[Pose2],
+        per_mode: usize,
+    ) -> Action {
         let mut world = World::new();
-        world.insert_resource(InfogainParams::default());
+        world.insert_resource(params);
         world.insert_resource(lidar);
         world.insert_resource(RobotParams::default());
         world.insert_resource(PhysicsParams::default());
@@ -147,6 +157,32 @@ mod tests {
         let west = Pose2::new(8.2 - east.x, 2.2 - east.y, wrap_angle(east.yaw + PI));
         let action = decide(corridor(), lidar, &[east, west], 100);
         assert!(action.linear > 0.0, "a bimodal belief must drive ahead toward the block, got {action:?}");
+    }
+
+    #[test]
+    fn reach_plans_drive_where_a_feature_beyond_the_primitives_horizon_comes_into_view() {
+        // The corridor with a 1.5 m LiDAR, 3.2 m short of the block (the mirror mode 2.2 m from
+        // it, facing away): within 2 steps no motion brings the block into range under either
+        // mode, so standing still (the one primitive here) is as good as any. A reach plan of 6
+        // steps does: driving on under the east mode, or turning round and driving under the west
+        // one. The block shows on 3 of 24 beams, which the default tempering (0.2) leaves within
+        // the entropy's bin noise; 60 untempered beams let it count.
+        let lidar = LidarParams { range_max_m: 1.5, ..Default::default() };
+        let east = Pose2::new(3.6, 1.1, 0.1);
+        let west = Pose2::new(8.2 - east.x, 2.2 - east.y, wrap_angle(east.yaw + PI));
+        let sharp = InfogainParams {
+            candidates: vec![(0.0, 0.0)],
+            beams: 60,
+            likelihood_scale: 1.0,
+            ..Default::default()
+        };
+        let reach = InfogainParams { reach_headings: 8, ..sharp };
+        let action = decide_with(reach, corridor(), lidar, &[east, west], 100);
+        let (straight_on, turn_round) = (Action::new(1.0, 0.0), Action::new(0.0, 1.0));
+        assert!(
+            action == straight_on || action == turn_round,
+            "a reach plan toward the block under one mode must beat standing still, got {action:?}"
+        );
     }
 
     #[test]

@@ -12,6 +12,7 @@ use crate::act::{DriveCommand, PhysicsParams, command_for};
 use crate::agent::Action;
 use crate::agent::infogain::entropy::histogram_entropy;
 use crate::agent::infogain::params::InfogainParams;
+use crate::agent::infogain::plans::candidate_plans;
 use crate::particles::{
     BeamTerms, LikelihoodFieldParams, ParticleError, ParticleSet, TransitionParams, propagate,
     systematic_indices,
@@ -61,6 +62,9 @@ const SUBSAMPLE_STREAM: u64 = 0;
 const HYPOTHESIS_STREAM: u64 = 1;
 const TRANSITION_STREAM: u64 = 2;
 
+/// The transition of a plan imagined without odometry noise.
+const EXACT_MOTION: TransitionParams = TransitionParams { trans_noise_m: 0.0, rot_noise_deg: 0.0 };
+
 /// Scores every candidate of `params` for the belief `set` (at least one particle). Every draw
 /// comes from streams keyed by `key` (subsample, hypotheses, and one per hypothesis and step
 /// for the transition noise, shared by all candidates), so the result depends on nothing else.
@@ -90,23 +94,20 @@ pub fn score_candidates(
     let bin_rad = params.bin_size_deg.to_radians();
     let mut scan = LidarScan::default();
     let h_count = hypotheses.len() as f32;
-    params
-        .candidates
-        .iter()
-        .map(|&(linear, angular)| {
-            let action = Action::new(linear, angular);
-            let command = command_for(action, models.robot);
+    candidate_plans(params, models.robot, models.physics)
+        .into_iter()
+        .map(|plan| {
             let (mut entropy, mut collisions, mut distance) = (0.0f32, 0usize, 0.0f32);
             for (h, &start) in hypotheses.iter().enumerate() {
                 let (mut pose, mut collided) = (start, false);
                 let mut moved = belief.clone();
-                for s in 0..params.horizon_steps {
-                    let step = drive_on_map(pose, command, models.physics, view);
+                let transition = if plan.noisy { models.transition } else { &EXACT_MOTION };
+                for (s, &action) in plan.actions.iter().enumerate() {
+                    let step = drive_on_map(pose, command_for(action, models.robot), models.physics, view);
                     // The same noise for every candidate (common random numbers): candidates differ
                     // by their motion, not by their draws.
-                    let transition_key: u64 =
-                        stream(&[key, TRANSITION_STREAM, h as u64, u64::from(s)]).random();
-                    propagate(&mut moved, &pose.between(&step.pose), models.transition, transition_key);
+                    let transition_key: u64 = stream(&[key, TRANSITION_STREAM, h as u64, s as u64]).random();
+                    propagate(&mut moved, &pose.between(&step.pose), transition, transition_key);
                     cast_scan(view.grid, step.pose, &[], &lidar, &mut scan);
                     terms.add_log_likelihoods(&mut moved, &scan, view.field, &view.map.origin)?;
                     (pose, collided, distance) =
@@ -123,7 +124,13 @@ pub fn score_candidates(
             let cost = expected_entropy
                 + params.collision_cost * collision_probability
                 + params.distance_cost_per_m * distance_m;
-            Ok(CandidateScore { action, expected_entropy, collision_probability, distance_m, cost })
+            Ok(CandidateScore {
+                action: plan.actions[0],
+                expected_entropy,
+                collision_probability,
+                distance_m,
+                cost,
+            })
         })
         .collect()
 }
