@@ -1,6 +1,7 @@
 //! Information-gain active localization (active Markov localization: Burgard, Fox & Thrun 1997;
-//! Fox, Burgard & Thrun 1998): drive the motion primitive after which the particle belief is
-//! expected to have the lowest entropy, with small costs for collisions and distance.
+//! Fox, Burgard & Thrun 1998): drive the candidate motion (a primitive, or a reach plan toward a
+//! far view) after which the particle belief is expected to have the lowest entropy, with small
+//! costs for collisions and distance.
 
 mod entropy;
 mod params;

@@ -2,9 +2,9 @@
 //! from the belief, let the filter's own models say what the belief would become, and score the
 //! candidate by the expected entropy of that belief plus its costs.
 //!
-//! Per hypothesis and horizon step: drive the imagined robot on the traversable map, move a
-//! weighted subsample of the particles by the odometry this reports (the filter's transition,
-//! with its noise), cast the scan the robot would see there (the LiDAR's ray caster), and weigh
+//! Per hypothesis and step of a plan (`plans.rs`): drive the imagined robot on the traversable
+//! map, move a weighted subsample of the particles by the odometry this reports (the filter's
+//! transition: with its noise for a primitive, exact for a reach plan), cast the scan the robot would see there (the LiDAR's ray caster), and weigh
 //! the moved particles against it with the filter's likelihood field. Only the map and the
 //! belief are read, never the true pose.
 
