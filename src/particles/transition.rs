@@ -44,6 +44,8 @@ impl StepParams for TransitionParams {
 pub fn propagate(set: &mut ParticleSet, delta: &Pose2, params: &TransitionParams, key: u64) {
     let sigma_t = params.trans_noise_m.abs();
     let sigma_r = params.rot_noise_deg.abs().to_radians();
+    // Without noise (PF-net pretraining, infogain's reach plans) nothing needs drawing.
+    let exact = sigma_t == 0.0 && sigma_r == 0.0;
     let ParticleSet { x, y, yaw, .. } = set;
     x.par_chunks_mut(TRANSITION_CHUNK)
         .zip(y.par_chunks_mut(TRANSITION_CHUNK))
@@ -52,11 +54,15 @@ pub fn propagate(set: &mut ParticleSet, delta: &Pose2, params: &TransitionParams
         .for_each(|(chunk, ((xs, ys), yaws))| {
             let mut rng = stream(&[key, chunk as u64]);
             for ((px, py), pyaw) in xs.iter_mut().zip(ys.iter_mut()).zip(yaws.iter_mut()) {
-                let noisy = Pose2::new(
-                    delta.x + sigma_t * rng.sample::<f32, _>(StandardNormal),
-                    delta.y + sigma_t * rng.sample::<f32, _>(StandardNormal),
-                    delta.yaw + sigma_r * rng.sample::<f32, _>(StandardNormal),
-                );
+                let noisy = if exact {
+                    *delta
+                } else {
+                    Pose2::new(
+                        delta.x + sigma_t * rng.sample::<f32, _>(StandardNormal),
+                        delta.y + sigma_t * rng.sample::<f32, _>(StandardNormal),
+                        delta.yaw + sigma_r * rng.sample::<f32, _>(StandardNormal),
+                    )
+                };
                 let moved = Pose2::new(*px, *py, *pyaw).compose(&noisy);
                 (*px, *py, *pyaw) = (moved.x, moved.y, moved.yaw);
             }

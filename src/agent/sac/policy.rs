@@ -79,6 +79,31 @@ pub struct PolicyState {
     warned: bool,
 }
 
+/// Fills `noise` with the standard normals of each of `order`'s robots, from its ScenarioRng.
+/// Zero noise is tanh(μ): a robot spawned without a ScenarioRng acts deterministically, with one
+/// warning (`warned`).
+fn draw_action_noise(
+    robots: &mut Query<RobotView>,
+    order: &[Entity],
+    noise: &mut Vec<f32>,
+    warned: &mut bool,
+) {
+    noise.clear();
+    for &robot in order {
+        let Some(mut rng) = robots.get_mut(robot).expect("listed above").9 else {
+            if !*warned {
+                tracing::warn!(
+                    "sac_policy: sample needs each robot's ScenarioRng; {robot:?} has none and acts by tanh(μ)"
+                );
+                *warned = true;
+            }
+            noise.extend([0.0; ACTION_LEN]);
+            continue;
+        };
+        noise.extend((0..ACTION_LEN).map(|_| rng.0.sample::<f32, _>(StandardNormal)));
+    }
+}
+
 type RobotView<'a> = (
     (Entity, &'a RobotId),
     &'a BeliefCrop,
@@ -167,25 +192,10 @@ pub fn sac_policy(
             agent.learner.nets.act(&obs, Some(&state.noise), &mut state.ws, &mut state.actions);
         }
         None => {
-            let noise = params.sample.then(|| {
-                state.noise.clear();
-                for &robot in &state.robots {
-                    // Zero noise is tanh(μ): a robot spawned without a ScenarioRng acts deterministically.
-                    match robots.get_mut(robot).expect("listed above").9 {
-                        Some(mut rng) => state
-                            .noise
-                            .extend((0..ACTION_LEN).map(|_| rng.0.sample::<f32, _>(StandardNormal))),
-                        None => {
-                            if !state.warned {
-                                tracing::warn!("sac_policy: sample needs each robot's ScenarioRng; {robot:?} has none and acts by tanh(μ)");
-                                state.warned = true;
-                            }
-                            state.noise.extend([0.0; ACTION_LEN]);
-                        }
-                    }
-                }
-                &state.noise[..]
-            });
+            if params.sample {
+                draw_action_noise(&mut robots, &state.robots, &mut state.noise, &mut state.warned);
+            }
+            let noise = params.sample.then_some(&state.noise[..]);
             state.loaded.as_ref().expect("loaded above").act(&obs, noise, &mut state.ws, &mut state.actions)
         }
     }
