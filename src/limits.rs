@@ -36,6 +36,8 @@ pub const RASTER_SIDE: Limit = Limit { min: 1, max: 1_024, expected: "1 to 1,024
 pub const DEPTH_COLUMNS: Limit = Limit { min: 1, max: 4_096, expected: "1 to 4,096 columns" };
 /// Belief crops an agent reads (each 4 × 50 × 50 bytes per transition in the replay buffer).
 pub const BELIEF_MODES: Limit = Limit { min: 1, max: 16, expected: "1 to 16 crops" };
+/// Past steps whose crops an agent reads beside the present ones (each as many bytes again).
+pub const BELIEF_HISTORY: Limit = Limit { min: 0, max: 8, expected: "0 to 8 past steps" };
 /// Seeds of a sweep: one job per seed and cell.
 pub const SEEDS: Limit = Limit { min: 1, max: 10_000, expected: "1 to 10,000 seeds" };
 /// Independent copies of a scene run side by side (`apfn run --worlds`).

@@ -20,6 +20,7 @@ fn config(dir: &Path) -> (TrainSacConfig, PathBuf) {
         network: "compact".into(),
         depth_columns: 0,
         belief_modes: 1,
+        belief_history: 0,
         agent: apfn::agent::sac::SacAgentConfig {
             buffer: 64,
             batch: 8,
@@ -138,6 +139,36 @@ fn a_multi_crop_agent_trains_on_the_crops_belief_crop_writes() {
     let (trainer, batch) = train_and_sample(dir.path(), config, "train_modes.ron");
     assert_eq!(trainer.agent().learner.nets.config.belief_channels, 12, "3 crops of 4 channels");
     assert_eq!(batch.transitions().obs.belief.len(), 2 * 12 * 50 * 50);
+}
+
+/// `belief_history` stacks past crops after the present one; a policy trained without them is a
+/// valid start (its networks widened with zero weights), and the schedule must agree.
+#[test]
+fn an_agent_with_history_starts_from_a_policy_without_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut config, _) = config(dir.path());
+    let (first, _) = train_and_sample(dir.path(), config.clone(), "train_first.ron");
+    first.agent().learner.nets.save(&dir.path().join("policy.safetensors")).unwrap();
+    let crop = "(\"belief_crop\",          ()),";
+    edit_schedule(dir.path(), &mut config, crop, "(\"belief_crop\", (history: 2)),", "apfn_history.ron");
+    config.init = Some("policy.safetensors".into());
+
+    let err = SacTrainer::new(config.clone(), &dir.path().join("train_mismatched.ron")).err().unwrap();
+    let err = format!("{err:#}");
+    assert!(err.contains("belief_history: expected 2") && err.contains("apfn_history.ron"), "{err}");
+
+    config.belief_history = 2;
+    let (trainer, _) = train_and_sample(dir.path(), config, "train_history.ron");
+    assert_eq!(trainer.agent().learner.nets.config.belief_channels, 12, "the present and 2 past crops");
+    let replay = &trainer.agent().replay;
+    let mut batch = SampledBatch::default();
+    replay.sample(&(0..replay.len()).collect::<Vec<_>>(), &mut batch);
+    let crop = 4 * 50 * 50;
+    let moved = batch.transitions().obs.belief.chunks_exact(3 * crop).filter(|stack| {
+        let (present, last) = stack.split_at(crop);
+        present.iter().any(|&v| v > 0.0) && present != &last[..crop]
+    });
+    assert!(moved.count() > 0, "past crops differ from the present once an episode is under way");
 }
 
 #[test]

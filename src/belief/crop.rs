@@ -7,8 +7,13 @@
 //! straight into the crop gives the same cells at O(particles + crop) instead of O(H·W) per
 //! step, so large maps cost nothing extra. Headings are stored relative to the crop's own
 //! heading, so a belief that turns with the robot looks the same to the agent.
+//!
+//! With `history: h` the crops of the last h steps follow the present ones (frame stacking, as
+//! DQN stacks Atari frames): the belief is the filter's memory of what the robot saw, but the
+//! crop shows only 5 m of it, and a stack shows how that part has moved and sharpened.
 
 use crate::belief::modes::belief_modes;
+use crate::episode::EpisodeStart;
 use crate::params::{StepParams, expect_param};
 use crate::particles::{ParticleSet, PoseEstimate};
 use crate::world::map::NetworkMap;
@@ -33,11 +38,14 @@ pub struct BeliefParams {
     pub modes: usize,
     /// Side of the square bins in which modes are found, metres (ours: 1.0).
     pub mode_bin_m: f32,
+    /// Past agent steps whose crops follow the present ones, most recent first (paper: 0). At an
+    /// episode's first step the past is the present repeated, so no episode shows the last one's.
+    pub history: usize,
 }
 
 impl Default for BeliefParams {
     fn default() -> Self {
-        Self { cells: 50, resolution_m: 0.1, modes: 1, mode_bin_m: 1.0 }
+        Self { cells: 50, resolution_m: 0.1, modes: 1, mode_bin_m: 1.0, history: 0 }
     }
 }
 
@@ -46,12 +54,14 @@ impl StepParams for BeliefParams {
         crate::limits::RASTER_SIDE.check("cells", self.cells)?;
         expect_param(self.resolution_m > 0.0, "resolution_m", "a cell side > 0 m")?;
         expect_param(self.modes > 0, "modes", "at least 1 crop (the estimate)")?;
-        expect_param(self.mode_bin_m > 0.0, "mode_bin_m", "a bin side > 0 m")
+        expect_param(self.mode_bin_m > 0.0, "mode_bin_m", "a bin side > 0 m")?;
+        crate::limits::BELIEF_HISTORY.check("history", self.history)
     }
 }
 
-/// A robot's belief crops, ready to be stacked into a batch: `modes × 4 × cells × cells` values,
-/// row-major per channel (the NCHW layout of a network input). Each crop has the layout of
+/// A robot's belief crops, ready to be stacked into a batch: `(1 + history) × modes × 4 × cells ×
+/// cells` values, the present step's crops first, row-major per channel (the NCHW layout of a
+/// network input). Each crop has the layout of
 /// `LocalGrid`: its centre pose at the crop's centre facing up, row 0 farthest ahead, column 0
 /// farthest to the left.
 #[derive(Component, Clone, Debug, Default, PartialEq)]
@@ -114,14 +124,14 @@ pub fn project_crop(
     }
 }
 
-/// Reads ParticleSet, PoseEstimate, OnMap → the map's NetworkMap, BeliefParams. Writes
-/// BeliefCrop (spawned empty with every robot).
+/// Reads ParticleSet, PoseEstimate, OnMap → the map's NetworkMap, EpisodeStart, BeliefParams.
+/// Writes BeliefCrop (spawned empty with every robot).
 pub fn belief_crop(
     params: Res<BeliefParams>,
     maps: Query<&NetworkMap>,
-    mut robots: Query<(&ParticleSet, &PoseEstimate, &OnMap, &mut BeliefCrop)>,
+    mut robots: Query<(&ParticleSet, &PoseEstimate, &OnMap, Has<EpisodeStart>, &mut BeliefCrop)>,
 ) {
-    robots.par_iter_mut().for_each(|(set, estimate, on_map, mut crop)| {
+    robots.par_iter_mut().for_each(|(set, estimate, on_map, starts, mut crop)| {
         let Ok(map) = maps.get(on_map.0) else {
             tracing::warn!("belief_crop: map {:?} has no NetworkMap", on_map.0);
             return;
@@ -129,9 +139,18 @@ pub fn belief_crop(
         let weights = set.weights();
         let centres = belief_modes(set, &weights, &estimate.pose, params.modes, params.mode_bin_m);
         let per_crop = BELIEF_CHANNELS * params.cells * params.cells;
-        crop.values.resize(per_crop * centres.len(), 0.0);
-        for (centre, out) in centres.iter().zip(crop.values.chunks_mut(per_crop)) {
+        let present = per_crop * centres.len();
+        let len = present * (1 + params.history);
+        let fresh = starts || crop.values.len() != len || crop.cells != params.cells;
+        crop.values.resize(len, 0.0);
+        // Each past step moves one place back; the oldest drops off the end.
+        crop.values.copy_within(..len - present, present);
+        for (centre, out) in centres.iter().zip(crop.values[..present].chunks_mut(per_crop)) {
             project_crop(set, &weights, map, centre, &params, out);
+        }
+        if fresh {
+            let (now, past) = crop.values.split_at_mut(present);
+            past.chunks_exact_mut(present).for_each(|step| step.copy_from_slice(now));
         }
         crop.cells = params.cells;
         crop.centres = centres;
@@ -211,5 +230,36 @@ mod tests {
         assert!(crop.centres[1].distance(&poses[1]) < 1e-5, "crop 1 on the heavier mode: {:?}", crop.centres);
         let heavy = crop.channel(1, 1);
         assert!((heavy[8 * 16 + 8] - 0.7).abs() < 1e-6, "its particle at the centre");
+    }
+
+    #[test]
+    fn history_keeps_the_last_steps_crops_and_forgets_them_when_an_episode_starts() {
+        let mut world = World::new();
+        world.insert_resource(BeliefParams { cells: 8, history: 2, ..Default::default() });
+        let map = world.spawn(room()).id();
+        let at = |x: f32| {
+            let pose = Pose2::new(x, 0.75, 0.0);
+            (ParticleSet::from_poses(&[pose]), PoseEstimate { pose, cov: Default::default() })
+        };
+        let robot = world.spawn((at(0.5), OnMap(map), BeliefCrop::default())).id();
+        let mut presents = vec![];
+        for x in [0.5, 0.9, 1.3] {
+            world.entity_mut(robot).insert(at(x));
+            world.run_system_once(belief_crop).expect("belief_crop runs");
+            let crop = world.get::<BeliefCrop>(robot).expect("crop");
+            presents.push(crop.values[..256].to_vec());
+        }
+        let values = &world.get::<BeliefCrop>(robot).expect("crop").values;
+        assert_eq!(values.len(), 3 * BELIEF_CHANNELS * 64, "the present and 2 past steps");
+        assert_ne!(presents[1], presents[2], "the robot moved: the free-space channel changed");
+        assert_eq!(&values[256..512], &presents[1][..], "one step back");
+        assert_eq!(&values[512..], &presents[0][..], "two steps back");
+        world.entity_mut(robot).insert((at(0.7), EpisodeStart));
+        world.run_system_once(belief_crop).expect("belief_crop runs");
+        let values = &world.get::<BeliefCrop>(robot).expect("crop").values;
+        assert!(
+            values[256..512] == values[..256] && values[512..] == values[..256],
+            "a new episode has no past"
+        );
     }
 }

@@ -43,13 +43,18 @@ pub struct TrainSacConfig {
     /// paper); the schedule's `belief_crop` must then have as many `modes`.
     #[serde(default = "one_crop")]
     pub belief_modes: usize,
+    /// Past steps whose crops the agent reads after the present ones (0, as the paper); the
+    /// schedule's `belief_crop` must then have as much `history`.
+    #[serde(default)]
+    pub belief_history: usize,
     #[serde(default)]
     pub agent: SacAgentConfig,
     /// A policy file (`policy.safetensors` of an earlier run) whose encoders, actor and critics
     /// the run starts from instead of fresh ones: fine-tuning, e.g. on another task. The target
     /// critics start as copies of the critics and α at `agent.hyper.initial_alpha`; the network
-    /// must be the one `network`, `depth_columns` and `belief_modes` describe. Relative to the
-    /// config file.
+    /// must be the one `network`, `depth_columns` and `belief_modes` describe, or have fewer
+    /// belief channels (a policy trained without `belief_history`, whose new channels then start
+    /// at zero weight). Relative to the config file.
     #[serde(default)]
     pub init: Option<PathBuf>,
     /// World steps to train for (each moves every robot once).
@@ -77,7 +82,8 @@ impl TrainSacConfig {
             crate::limits::DEPTH_COLUMNS.check("depth_columns", self.depth_columns)?;
         }
         crate::limits::BELIEF_MODES.check("belief_modes", self.belief_modes)?;
-        let belief_channels = BELIEF_CHANNELS * self.belief_modes;
+        crate::limits::BELIEF_HISTORY.check("belief_history", self.belief_history)?;
+        let belief_channels = BELIEF_CHANNELS * self.belief_modes * (1 + self.belief_history);
         Ok(SacNetConfig { depth_columns: self.depth_columns, belief_channels, ..named })
     }
 
@@ -150,27 +156,26 @@ impl SacTrainer {
         let (mut app, robots) = headless_app(&loaded, pipeline)?;
         let net = config.net_config().map_err(anyhow::Error::msg)?;
         // The schedule's crops must be the network's input; a mismatch would only warn per step.
-        let crops = app.world().get_resource::<BeliefParams>().map_or(1, |b| b.modes);
-        anyhow::ensure!(
-            crops == config.belief_modes,
-            "{}: belief_modes: expected {crops}, the `modes` of belief_crop in {}, got {}",
-            path.display(),
-            config.systems.display(),
-            config.belief_modes
-        );
+        let crops = app.world().get_resource::<BeliefParams>().map_or((1, 0), |b| (b.modes, b.history));
+        for (field, scheduled, configured) in [
+            ("belief_modes", crops.0, config.belief_modes),
+            ("belief_history", crops.1, config.belief_history),
+        ] {
+            let step_field = field.trim_start_matches("belief_");
+            anyhow::ensure!(
+                scheduled == configured,
+                "{}: {field}: expected {scheduled}, the `{step_field}` of belief_crop in {}, got {configured}",
+                path.display(),
+                config.systems.display(),
+            );
+        }
         let nets = match &config.init {
             None => SacNetworks::new(&net, config.seed),
             Some(init) => {
                 let init = dir.join(init);
                 let nets = SacNetworks::load(&init).with_context(|| format!("{}: init", path.display()))?;
-                anyhow::ensure!(
-                    nets.config == net,
-                    "{}: init: {} holds a network {:?}, expected the config's {net:?}",
-                    path.display(),
-                    init.display(),
-                    nets.config
-                );
-                nets
+                nets.widened(&net)
+                    .map_err(|e| anyhow::anyhow!("{}: init: {}: {e}", path.display(), init.display()))?
             }
         };
         let learner = SacLearner::new(nets, config.agent.hyper.clone());

@@ -8,6 +8,7 @@ pub mod networks;
 pub mod saved;
 pub mod tanh_gaussian;
 pub mod update;
+mod widen;
 
 pub use config::{ACTION_LEN, STATE_LEN, SacNetConfig};
 pub use networks::{Observations, PolicyWorkspace, SacNetworks};
