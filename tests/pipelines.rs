@@ -103,6 +103,40 @@ fn belief_crop_follows_the_filter_in_a_running_pipeline() {
     }
 }
 
+/// A policy whose inputs the schedule does not produce (here: the shipped one-crop policy behind a
+/// belief_crop stacking two past steps) stops the world from being built, naming the schedule,
+/// the step and the field, instead of running with robots that never move.
+#[test]
+fn a_policy_the_schedule_cannot_feed_is_refused_before_the_first_step() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let policy = repo.join("models/apfn_compact.safetensors");
+    let schedule = |crop: &str| {
+        format!(
+            r#"Schedule(steps: [
+            ("episode_reset", ()), ("odometry", ()), ("lidar", ()), ("local_grid", ()),
+            ("init_particles", (task: tracking)), ("transition", ()), ("mcl_likelihood_field", ()),
+            ("resample", ()), ("estimate", ()), ("belief_crop", {crop}), ("step_metrics", ()),
+            ("localization_reward", ()), ("sac_policy", (checkpoint: Some({policy:?}))),
+            ("drive", ()), ("physics", ()),
+        ])"#
+        )
+    };
+    let loaded = small_scene().into_loaded(Path::new("tests/pipelines")).unwrap();
+    let build = |crop: &str| {
+        let pipeline =
+            Pipeline::parse(&schedule(crop), Path::new("stacked.ron"), &standard_registry()).unwrap();
+        headless_app(&loaded, pipeline).map(|_| ())
+    };
+    let err = build("(history: 2)").unwrap_err().to_string();
+    assert!(
+        err.starts_with("stacked.ron: step 13 `sac_policy`:")
+            && err.contains("history: 2")
+            && err.contains("1 belief crop"),
+        "{err}"
+    );
+    build("()").expect("the schedule the policy was trained with builds");
+}
+
 #[test]
 fn every_shipped_eval_config_loads() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");

@@ -270,6 +270,9 @@ impl EvalConfig {
             }
         }
         schedules.extend(variants);
+        for (_, pipeline) in &schedules {
+            crate::plugin::check_policy_inputs(pipeline)?;
+        }
         let scenes = self
             .maps
             .iter()

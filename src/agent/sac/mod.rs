@@ -9,7 +9,7 @@ mod update;
 
 pub use learner::{EpisodeReturn, SacAgent, SacAgentConfig};
 pub use observation::{ObservationShape, decode, encode_belief, encode_grid, robot_state};
-pub use policy::{SacPolicyParams, sac_policy, shared_policy};
+pub use policy::{SacPolicyParams, check_policy_inputs, sac_policy, shared_policy};
 pub use replay::{ReplayBuffer, SampledBatch};
 pub use reward::{Reward, RewardParams, localization_reward, reward};
 pub use update::{SacUpdateParams, sac_update};

@@ -10,11 +10,11 @@ use crate::agent::sac::observation::{
     ObservationShape, decode, encode_belief, encode_depth, encode_grid, robot_state,
 };
 use crate::agent::sac::reward::Reward;
-use crate::belief::BeliefCrop;
+use crate::belief::{BELIEF_CHANNELS, BeliefCrop, BeliefParams};
 use crate::episode::{Episode, EpisodeEnd, EpisodeParams};
 use crate::nn::sac::{ACTION_LEN, Observations, PolicyWorkspace, STATE_LEN, SacNetworks};
 use crate::params::StepParams;
-use crate::sense::{DepthParams, DepthStrip, LocalGrid};
+use crate::sense::{DepthParams, DepthStrip, LocalGrid, LocalGridParams};
 use crate::world::{RobotId, ScenarioRng, in_id_order};
 use bevy::prelude::*;
 use rand::Rng;
@@ -59,6 +59,45 @@ pub fn shared_policy(path: &str) -> Result<Arc<SacNetworks>, String> {
     let policy = Arc::new(SacNetworks::load(Path::new(path)).map_err(|e| format!("checkpoint: {e}"))?);
     policies.insert(path.to_string(), policy.clone());
     Ok(policy)
+}
+
+/// `Err` saying which step's field to set when the schedule's crops, grid or depth strip are not
+/// the input of the policy `sac_policy` loads: checked when a world is built, so that a run fails
+/// before its first step instead of writing results for robots that never moved.
+pub fn check_policy_inputs(world: &World) -> Result<(), String> {
+    let Some(path) = world.get_resource::<SacPolicyParams>().and_then(|p| p.checkpoint.clone()) else {
+        return Ok(());
+    };
+    let net = shared_policy(&path)?.config.clone();
+    let crop = world.get_resource::<BeliefParams>().cloned().unwrap_or_default();
+    let channels = BELIEF_CHANNELS * crop.modes * (1 + crop.history);
+    if (channels, crop.cells) != (net.belief_channels, net.belief_cells) {
+        return Err(format!(
+            "{path} reads {} belief crop(s) of {} cells (modes × (1 + history)); belief_crop gives {} \
+             of {} (modes: {}, history: {}): set its `modes`, `history` and `cells` to match",
+            net.belief_channels / BELIEF_CHANNELS,
+            net.belief_cells,
+            channels / BELIEF_CHANNELS,
+            crop.cells,
+            crop.modes,
+            crop.history
+        ));
+    }
+    let grid_cells = world.get_resource::<LocalGridParams>().cloned().unwrap_or_default().out_cells;
+    if grid_cells != net.grid_cells {
+        return Err(format!(
+            "{path} reads a {0}×{0} LiDAR grid; local_grid gives {1}×{1}: set its `out_cells` to {0}",
+            net.grid_cells, grid_cells
+        ));
+    }
+    let columns = world.get_resource::<DepthParams>().map(|d| d.columns);
+    match (net.depth_columns, columns) {
+        (0, _) => Ok(()),
+        (n, Some(c)) if c == n => Ok(()),
+        (n, _) => Err(format!(
+            "{path} reads a depth strip of {n} columns; schedule the `depth` step with columns: {n}"
+        )),
+    }
 }
 
 /// Buffers kept across steps.
@@ -342,6 +381,34 @@ mod tests {
         let missing =
             SacPolicyParams { checkpoint: Some("no/such/policy.safetensors".into()), sample: false };
         assert!(missing.check().unwrap_err().contains("no/such/policy.safetensors"));
+    }
+
+    #[test]
+    fn the_policy_inputs_are_checked_against_the_crop_grid_and_depth_steps() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("policy.safetensors");
+        SacNetworks::new(&SacNetConfig { belief_channels: 8, depth_columns: 3, ..tiny() }, 3)
+            .save(&path)
+            .unwrap();
+        let mut world = World::new();
+        assert_eq!(check_policy_inputs(&world), Ok(()), "no checkpoint, nothing to check");
+        world
+            .insert_resource(SacPolicyParams { checkpoint: Some(path.display().to_string()), sample: false });
+        world.insert_resource(BeliefParams { cells: 5, history: 1, ..Default::default() });
+        world.insert_resource(LocalGridParams { out_cells: 5, ..Default::default() });
+        world.insert_resource(DepthParams { columns: 3, ..Default::default() });
+        assert_eq!(check_policy_inputs(&world), Ok(()));
+        world.insert_resource(BeliefParams { cells: 5, ..Default::default() });
+        let err = check_policy_inputs(&world).unwrap_err();
+        assert!(err.contains("reads 2 belief crop(s) of 5 cells") && err.contains("history: 0"), "{err}");
+        world.insert_resource(BeliefParams { cells: 5, history: 1, ..Default::default() });
+        world.insert_resource(LocalGridParams::default());
+        let err = check_policy_inputs(&world).unwrap_err();
+        assert!(err.contains("5×5 LiDAR grid") && err.contains("`out_cells` to 5"), "{err}");
+        world.insert_resource(LocalGridParams { out_cells: 5, ..Default::default() });
+        world.remove_resource::<DepthParams>();
+        let err = check_policy_inputs(&world).unwrap_err();
+        assert!(err.contains("`depth` step with columns: 3"), "{err}");
     }
 
     #[test]
