@@ -62,8 +62,9 @@ pub fn shared_policy(path: &str) -> Result<Arc<SacNetworks>, String> {
 }
 
 /// `Err` saying which step's field to set when the schedule's crops, grid or depth strip are not
-/// the input of the policy `sac_policy` loads: checked when a world is built, so that a run fails
-/// before its first step instead of writing results for robots that never moved.
+/// the input of the policy `sac_policy` loads: checked when an eval config loads and whenever a
+/// world is built (`plugin::check_policy_inputs`), so that a run fails before its first step
+/// instead of writing results for robots that never moved.
 pub fn check_policy_inputs(world: &World) -> Result<(), String> {
     let Some(path) = world.get_resource::<SacPolicyParams>().and_then(|p| p.checkpoint.clone()) else {
         return Ok(());
