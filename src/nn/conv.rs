@@ -571,6 +571,18 @@ pub fn weight_from_hwio(hwio: &[f32], kernel: usize, c_in: usize, c_out: usize) 
     ours
 }
 
+/// Our kernel `old` ([c_out][c_in][kh][kw]) in `wide`, a kernel of the same outputs and taps with
+/// more input channels: the old channels become channels `first..` of every output, every other
+/// weight is 0 — a network widened to a new input that it ignores until trained.
+pub fn widen_input_channels(old: &[f32], wide: &mut [f32], c_out: usize, taps: usize, first: usize) {
+    let (per_old, per_new) = (old.len() / c_out, wide.len() / c_out);
+    assert!(first * taps + per_old <= per_new, "the old channels fit in the wide kernel at `first`");
+    wide.fill(0.0);
+    for (o, n) in old.chunks_exact(per_old).zip(wide.chunks_exact_mut(per_new)) {
+        n[first * taps..][..per_old].copy_from_slice(o);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -914,5 +926,13 @@ mod tests {
         // k=2, c_in=1, c_out=2: hwio[kh][kw][0][o] = 2(2kh + kw) + o → ours[o][0][kh][kw].
         let hwio: Vec<f32> = (0..8).map(|v| v as f32).collect();
         assert_eq!(weight_from_hwio(&hwio, 2, 1, 2), vec![0.0, 2.0, 4.0, 6.0, 1.0, 3.0, 5.0, 7.0]);
+    }
+
+    #[test]
+    fn widened_kernels_keep_each_outputs_old_taps_at_their_channel() {
+        // 2 outputs × 1 channel × 2 taps → 2 outputs × 3 channels, the old one as channel 1.
+        let mut wide = vec![9.0; 12];
+        widen_input_channels(&[1.0, 2.0, 3.0, 4.0], &mut wide, 2, 2, 1);
+        assert_eq!(wide, [0.0, 0.0, 1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 3.0, 4.0, 0.0, 0.0]);
     }
 }

@@ -6,6 +6,7 @@
 
 use super::model::PfNet;
 use super::observation::Observation;
+use crate::nn::conv::widen_input_channels;
 
 impl PfNet {
     /// This network observing `observation`: itself if it already does, else a `grid` or `depth`
@@ -41,15 +42,10 @@ impl PfNet {
             let new = wide.params.get_mut(id);
             if *old_shape == shape {
                 new.copy_from_slice(old);
-            } else if let ([c_out, 1, kh, kw], [c_out2, channels, kh2, kw2]) = (&old_shape[..], &shape[..])
+            } else if let ([c_out, 1, kh, kw], [c_out2, _, kh2, kw2]) = (&old_shape[..], &shape[..])
                 && (c_out, kh, kw) == (c_out2, kh2, kw2)
             {
-                // Kernels [c_out][c_in][k][k]: the old channel's taps, zeros for the other.
-                let taps = kh * kw;
-                new.fill(0.0);
-                for (o, src) in old.chunks_exact(taps).enumerate() {
-                    new[(o * channels + kept_channel) * taps..][..taps].copy_from_slice(src);
-                }
+                widen_input_channels(old, new, *c_out, kh * kw, kept_channel);
             } else {
                 return Err(format!("`{name}`: shape {old_shape:?} does not widen to {shape:?}"));
             }

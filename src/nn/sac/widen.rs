@@ -2,6 +2,7 @@
 //! the new channels enter the first convolution with zero weight, so the widened networks act
 //! exactly as the trained ones until training teaches them to read the new input.
 
+use crate::nn::conv::widen_input_channels;
 use crate::nn::sac::config::SacNetConfig;
 use crate::nn::sac::networks::SacNetworks;
 
@@ -26,11 +27,7 @@ impl SacNetworks {
             let to = wide.params.find(&spec.name).expect("the same layout but for the channels");
             let (from, into) = (self.params.get(id), wide.params.get_mut(to));
             if spec.name == BELIEF_INPUT_KERNEL {
-                // OIHW: per output channel, the old input channels' taps, then zeros.
-                let (per_old, per_new) = (from.len() / spec.shape[0], into.len() / spec.shape[0]);
-                for (o, n) in from.chunks_exact(per_old).zip(into.chunks_exact_mut(per_new)) {
-                    n[..per_old].copy_from_slice(o);
-                }
+                widen_input_channels(from, into, spec.shape[0], spec.shape[2] * spec.shape[3], 0);
             } else {
                 into.copy_from_slice(from);
             }
