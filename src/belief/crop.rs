@@ -141,7 +141,7 @@ pub fn belief_crop(
         let per_crop = BELIEF_CHANNELS * params.cells * params.cells;
         let present = per_crop * centres.len();
         let len = present * (1 + params.history);
-        let fresh = starts || crop.values.len() != len || crop.cells != params.cells;
+        let fresh = starts || crop.values.len() != len;
         crop.values.resize(len, 0.0);
         // Each past step moves one place back; the oldest drops off the end.
         crop.values.copy_within(..len - present, present);
