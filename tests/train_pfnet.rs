@@ -282,6 +282,71 @@ fn train_pfnet_local_map_cell_m_widens_the_window_of_init() {
     assert_eq!(bad.check().unwrap_err(), "local_map_cell_m: expected 0.01 to 1 m, found 0");
 }
 
+/// A one-view checkpoint starts a wide-view run: on the same episodes, the widened network's
+/// first loss is the one-view network's to the bit (the new channels start at zero), and the
+/// step then trains them. Episodes without wide grids of the view's window are refused by name;
+/// a collection keeps the wide grids.
+#[test]
+fn train_pfnet_wide_view_starts_from_a_one_view_checkpoint() {
+    use apfn::nn::pfnet::WideView;
+    use apfn::train::collect::{CollectConfig, collect, load_collection};
+    let dir = tempfile::tempdir().unwrap();
+    let init = PfNet::new(PfNetConfig::compact(), 4).unwrap();
+    let narrow = TrainPfNetConfig { init: Some(saved(&init, dir.path(), "init")), ..tiny() };
+    let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0 };
+    let wide = TrainPfNetConfig {
+        wide_view: Some(view),
+        collect_schedule: "systems/collect_pfnet_wide.ron".into(),
+        ..narrow.clone()
+    };
+    let [narrow_train, _] = simulate_data(&narrow, |_, _| {}).unwrap();
+    let [wide_train, _] = simulate_data(&wide, |_, _| {}).unwrap();
+    assert_eq!(wide_train.wide_extent_m, Some(10.0));
+    for (n, w) in narrow_train.episodes.iter().zip(&wide_train.episodes) {
+        assert_eq!((&n.poses, &n.grids), (&w.poses, &w.grids), "the same episodes");
+        assert_eq!(w.wide_grids.len(), w.grids.len(), "one wide grid per step");
+        assert_ne!(w.wide_grids, w.grids, "over another window");
+    }
+
+    let pool = Workspaces::for_current_pool();
+    let mut losses = vec![];
+    let mut wide_state = None;
+    for (config, data) in [(&narrow, &narrow_train), (&wide, &wide_train)] {
+        let mut state = TrainState::new(config).unwrap();
+        let (mut buffers, mut grads) = (BatchBuffers::default(), GradBuffers::default());
+        losses.push(state.train_step(config, (data, &[]), &mut buffers, &mut grads, &pool));
+        wide_state = Some(state);
+    }
+    assert_eq!(losses[0], losses[1], "zero-weight wide channels change no likelihood");
+    let model = wide_state.unwrap().model;
+    assert_eq!(
+        (model.config.wide_view, model.config.map_channels, model.config.obs_channels),
+        (Some(view), 2, 2)
+    );
+    let wide_map_weights = |model: &PfNet| -> Vec<f32> {
+        let id = model.params.find("m_c3/kernel").expect("the map encoder's first 3×3 conv");
+        (model.params.get(id).chunks_exact(9).skip(1).step_by(2)).flatten().copied().collect()
+    };
+    assert!(wide_map_weights(&model).iter().any(|&w| w != 0.0), "the wide map channel learns");
+
+    let unfed = TrainPfNetConfig { collect_schedule: narrow.collect_schedule.clone(), ..wide.clone() };
+    let err = simulate_data(&unfed, |_, _| {}).unwrap_err().to_string();
+    assert!(err.starts_with("wide_view: expected episodes whose wide grid spans Some(10.0) m"), "{err}");
+
+    let collection = CollectConfig {
+        shards: 1,
+        maps_per_shard: 1,
+        episodes_per_shard: 2,
+        steps: 4,
+        schedule: wide.collect_schedule.clone(),
+        ..Default::default()
+    };
+    collect(&collection, dir.path(), |_, _| {}).unwrap();
+    let set = load_collection(dir.path()).unwrap();
+    assert_eq!(set.wide_extent_m, Some(10.0), "the window comes back");
+    assert!(set.episodes.iter().all(|e| e.wide_grids.len() == 4 * 56 * 56), "and the wide grids");
+}
+
 #[test]
 fn collect_is_deterministic_resumable_and_loads_back() {
     use apfn::train::collect::{CollectConfig, Manifest, collect, load_collection};

@@ -3,7 +3,7 @@
 //! every particle of every robot in the world.
 
 use crate::nn::pfnet::{
-    FeatureBank, FeatureCacheSpec, MapView, PfNet, PfNetConfig, Workspaces, crop_local_maps, depth_image,
+    FeatureBank, FeatureCacheSpec, MapView, PfNet, PfNetConfig, Workspaces, crop_local_map_stack, depth_image,
 };
 use crate::params::{StepParams, expect_param};
 use crate::particles::set::{
@@ -77,7 +77,15 @@ impl StepParams for PfNetLikelihoodParams {
             "likelihood_scale",
             "a finite number > 0",
         )?;
-        shared_model(self).map(|_| ())
+        let model = shared_model(self)?;
+        match (self.features, model.config.wide_view) {
+            (MapFeatures::Cached, Some(_)) => Err(format!(
+                "features: the checkpoint {} has a wide view (two map channels); the feature cache \
+                 encodes one: expected `exact`",
+                self.checkpoint.as_deref().unwrap_or("(untrained)")
+            )),
+            _ => Ok(()),
+        }
     }
 }
 
@@ -130,6 +138,14 @@ fn missing_input(model: &PfNet, grid: &LocalGrid, strip: Option<&DepthStrip>) ->
     }
     if observation.uses_depth() && strip.is_none_or(|strip| strip.depths_m.is_empty()) {
         return Some("a depth strip (the `depth` step)");
+    }
+    if let Some(view) = model.config.wide_view
+        && grid
+            .wide
+            .as_ref()
+            .is_none_or(|wide| wide.extent_m != view.grid_extent_m || wide.values.len() != grid.values.len())
+    {
+        return Some("a wide LiDAR grid over the network's window (`local_grid`'s `wide_extent_m`)");
     }
     None
 }
@@ -187,9 +203,12 @@ pub fn pfnet_likelihood(
         if weighed(grid, strip, on_map, set).is_some() {
             let at = obs.len();
             obs.resize(at + model.obs_len(), 0.0);
-            let (grid_channel, depth_channel) = model.config.observation.split(&mut obs[at..]);
+            let (grid_channel, depth_channel, wide_channel) = model.config.split_observation(&mut obs[at..]);
             if let Some(channel) = grid_channel {
                 channel.copy_from_slice(&grid.values);
+            }
+            if let (Some(channel), Some(wide)) = (wide_channel, &grid.wide) {
+                channel.copy_from_slice(&wide.values);
             }
             if let (Some(channel), Some(strip)) = (depth_channel, strip) {
                 depth_image(&strip.depths_m, model.config.obs_cells, channel);
@@ -204,6 +223,7 @@ pub fn pfnet_likelihood(
     }
     obs_terms.resize(robot_count * model.obs_term_len(), 0.0);
     inputs.resize(particles * per_particle, 0.0);
+    let local_maps = model.config.local_maps();
     rayon::join(
         || model.observation_terms_par(obs, obs_terms, pool),
         || {
@@ -213,14 +233,9 @@ pub fn pfnet_likelihood(
                 let out = &mut inputs[first * per_particle..(first + set.len()) * per_particle];
                 first += set.len();
                 match params.features {
-                    MapFeatures::Exact => crop_local_maps(
-                        &map_view(map),
-                        &set.x,
-                        &set.y,
-                        &set.yaw,
-                        &model.config.local_map,
-                        out,
-                    ),
+                    MapFeatures::Exact => {
+                        crop_local_map_stack(&map_view(map), &set.x, &set.y, &set.yaw, &local_maps, out)
+                    }
                     MapFeatures::Cached => {
                         let bank = banks.entry(on_map.0).or_insert_with(|| {
                             let spec = FeatureCacheSpec {
@@ -277,7 +292,8 @@ pub fn map_view(map: &NetworkMap) -> MapView<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::pfnet::{MapInput, Observation, Workspace};
+    use crate::nn::pfnet::{MapInput, Observation, WideView, Workspace};
+    use crate::sense::WideGrid;
     use crate::testing::tiny_room;
     use crate::world::Pose2;
     use bevy::ecs::system::RunSystemOnce;
@@ -286,7 +302,11 @@ mod tests {
         [Pose2::new(0.5, 0.5, 0.0), Pose2::new(1.2, 0.8, 1.5), Pose2::new(1.6, 1.1, -2.5)];
 
     fn grid(seed: usize) -> LocalGrid {
-        LocalGrid { cells: 56, values: (0..56 * 56).map(|i| ((i * 7 + seed) % 3) as f32 / 2.0).collect() }
+        LocalGrid {
+            cells: 56,
+            values: (0..56 * 56).map(|i| ((i * 7 + seed) % 3) as f32 / 2.0).collect(),
+            wide: None,
+        }
     }
 
     /// A world with the tiny room's network map and one robot per grid, each with `POSES`.
@@ -312,7 +332,7 @@ mod tests {
             POSES.iter().map(|p| p.yaw).collect(),
         );
         let mut maps = vec![0.0; 3 * model.local_map_len()];
-        crop_local_maps(&map_view(&map), &xs, &ys, &yaws, &model.config.local_map, &mut maps);
+        crop_local_map_stack(&map_view(&map), &xs, &ys, &yaws, &model.config.local_maps(), &mut maps);
         // The training path: the joint stage on concatenated features, not the system's split one.
         let loglik = model.forward_steps(obs, (&maps, MapInput::LocalMaps), 1, 3, &mut ws);
         let total: f32 = loglik.iter().map(|l| l.exp()).sum();
@@ -411,6 +431,47 @@ mod tests {
         assert!(
             weights.iter().zip(&narrow).any(|(w, n)| (w - n).abs() > 1e-4),
             "the 0.1 m crop must weigh differently: {weights:?} vs {narrow:?}"
+        );
+    }
+
+    /// A network with a wide view reads the wide grid and crops both local maps; a robot whose wide
+    /// grid spans another window is left unweighed, and the feature cache is refused by name.
+    #[test]
+    fn pfnet_likelihood_feeds_a_wide_view_both_windows() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("wide_view.safetensors");
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0 };
+        let model = PfNet::new(PfNetConfig::compact().with_wide_view(Some(view)), 4).unwrap();
+        model.save(&path).unwrap();
+        let mut world = World::new();
+        let checkpoint = Some(path.display().to_string());
+        world.insert_resource(PfNetLikelihoodParams { checkpoint: checkpoint.clone(), ..Default::default() });
+        let map = world.spawn(NetworkMap::from_fine(&tiny_room(), 0.1)).id();
+        let with_wide = |extent_m: f32| LocalGrid {
+            wide: Some(WideGrid { extent_m, values: grid(5).values }),
+            ..grid(0)
+        };
+        let robot = |g: LocalGrid| (g, OnMap(map), ParticleSet::from_poses(&POSES));
+        let seeing = world.spawn(robot(with_wide(10.0))).id();
+        let other_window = world.spawn(robot(with_wide(8.0))).id();
+        world.run_system_once(pfnet_likelihood).expect("system runs");
+
+        let obs = [grid(0).values, grid(5).values].concat();
+        let (weights, want) =
+            (world.get::<ParticleSet>(seeing).unwrap().weights(), expected_weights(&model, &obs));
+        assert!(weights.iter().zip(&want).all(|(w, e)| (w - e).abs() < 1e-5), "{weights:?} vs {want:?}");
+        assert_eq!(
+            world.get::<LikelihoodStats>(other_window).unwrap().updates,
+            0,
+            "8 m is not the network's 10 m"
+        );
+
+        let cached =
+            PfNetLikelihoodParams { checkpoint, features: MapFeatures::Cached, ..Default::default() };
+        let err = cached.check().unwrap_err();
+        assert!(
+            err.starts_with("features: the checkpoint") && err.contains("wide_view.safetensors"),
+            "{err}"
         );
     }
 

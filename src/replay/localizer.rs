@@ -24,14 +24,14 @@ use crate::compose::{Pipeline, map_layers, standard_registry};
 use crate::particles::{
     BeamModelParams, FilterHealth, InitParams, LikelihoodFieldParams, NeedsInit, ParticleSet,
     PfNetLikelihoodParams, PoseEstimate, ResampleParams, StartGuess, Task, TransitionParams, estimate,
-    init_particles,
+    init_particles, shared_model,
 };
 use crate::plugin::ApfnPlugin;
 use crate::replay::error::ReplayError;
 use crate::replay::feed::{LogFeed, Reading};
 use crate::replay::fit::scan_fit;
 use crate::replay::log::{EstimateLine, LogLine};
-use crate::sense::{LidarScan, LocalGrid, Odometry};
+use crate::sense::{LidarScan, LocalGrid, LocalGridParams, Odometry};
 use crate::world::map::{DistanceField, TraversableMap};
 use crate::world::rng::stream;
 use crate::world::{OccupancyMap, OnMap, Pose2, Robot, RobotId, RobotParams, RobotRngs, TruePose};
@@ -127,11 +127,17 @@ impl LocalizerParams {
         }
         let (grid, likelihood) = match self.model {
             ReplayModel::LikelihoodField => {
-                ("", format!("(\"mcl_likelihood_field\", {})", ron(&self.likelihood_field)))
+                (String::new(), format!("(\"mcl_likelihood_field\", {})", ron(&self.likelihood_field)))
             }
-            ReplayModel::Beam => ("", format!("(\"mcl_beam_model\", {})", ron(&self.beam_model))),
+            ReplayModel::Beam => (String::new(), format!("(\"mcl_beam_model\", {})", ron(&self.beam_model))),
             ReplayModel::Pfnet => {
-                ("(\"local_grid\", ()),", format!("(\"pfnet_likelihood\", {})", ron(&self.pfnet)))
+                // A network with a wide view also reads the scan over its wider window. A
+                // checkpoint that does not load is named when the schedule is checked.
+                let wide = shared_model(&self.pfnet).ok().and_then(|model| model.config.wide_view);
+                let grid =
+                    LocalGridParams { wide_extent_m: wide.map(|view| view.grid_extent_m), ..default() };
+                let grid = format!("(\"local_grid\", {}),", ron(&grid));
+                (grid, format!("(\"pfnet_likelihood\", {})", ron(&self.pfnet)))
             }
         };
         format!(
@@ -323,6 +329,23 @@ mod tests {
         let filter = ["init_particles", "transition", "mcl_likelihood_field", "resample", "estimate"];
         assert_eq!(systems(ReplayModel::LikelihoodField), [&["log_feed"][..], &filter].concat());
         assert_eq!(systems(ReplayModel::Beam)[3], "mcl_beam_model");
+    }
+
+    /// A PF-net with a wide view gets the wide grid it reads, over its own window.
+    #[test]
+    fn localizer_feeds_a_wide_view_its_window() {
+        use crate::nn::pfnet::{PfNet, PfNetConfig, WideView};
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("wide_view.safetensors");
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 9.0 };
+        PfNet::new(PfNetConfig::compact().with_wide_view(Some(view)), 1).unwrap().save(&path).unwrap();
+        let pfnet = PfNetLikelihoodParams { checkpoint: Some(path.display().to_string()), ..default() };
+        let params = LocalizerParams { model: ReplayModel::Pfnet, pfnet, ..small_radius() };
+        let guess = InitialGuess::Pose(Pose2::new(1.0, 0.7, 0.2));
+        let mut filter = Localizer::new(tiny_room(), params, guess, 1).expect("filter");
+        filter.app.update();
+        let grid = filter.app.world().get::<LocalGrid>(filter.robot).unwrap();
+        assert_eq!(grid.wide.as_ref().map(|wide| wide.extent_m), Some(9.0));
     }
 
     #[test]

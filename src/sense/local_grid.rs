@@ -26,11 +26,14 @@ pub struct LocalGridParams {
     pub out_cells: usize,
     /// Radius of the robot footprint drawn free around the centre, metres (reference code: 0.32).
     pub footprint_radius_m: f32,
+    /// Beyond the reference: the same scan rasterised again over this wider window (same cells),
+    /// for a PF-net with a wide view (`PfNetConfig::wide_view`). Absent: one grid.
+    pub wide_extent_m: Option<f32>,
 }
 
 impl Default for LocalGridParams {
     fn default() -> Self {
-        Self { cells: 128, extent_m: 5.0, out_cells: 56, footprint_radius_m: 0.32 }
+        Self { cells: 128, extent_m: 5.0, out_cells: 56, footprint_radius_m: 0.32, wide_extent_m: None }
     }
 }
 
@@ -39,6 +42,9 @@ impl StepParams for LocalGridParams {
         crate::limits::RASTER_SIDE.check("cells", self.cells)?;
         crate::limits::RASTER_SIDE.check("out_cells", self.out_cells)?;
         expect_param(self.extent_m > 0.0, "extent_m", "an extent > 0 m")?;
+        if let Some(wide) = self.wide_extent_m {
+            expect_param(wide.is_finite() && wide > 0.0, "wide_extent_m", "an extent > 0 m")?;
+        }
         expect_param(self.footprint_radius_m >= 0.0, "footprint_radius_m", "a radius ≥ 0 m")
     }
 }
@@ -50,6 +56,15 @@ impl StepParams for LocalGridParams {
 #[derive(Component, Clone, Debug, Default, PartialEq)]
 pub struct LocalGrid {
     pub cells: usize,
+    pub values: Vec<f32>,
+    /// The same scan over `LocalGridParams::wide_extent_m`, when asked for.
+    pub wide: Option<WideGrid>,
+}
+
+/// A second raster of the scan over a wider window: same cells and layout as [`LocalGrid`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct WideGrid {
+    pub extent_m: f32,
     pub values: Vec<f32>,
 }
 
@@ -163,6 +178,11 @@ pub fn local_grid(params: Res<LocalGridParams>, mut robots: Query<(&LidarScan, &
         grid.cells = params.out_cells;
         grid.values.resize(params.out_cells * params.out_cells, UNKNOWN);
         rasterize_scan(scan, &params, &mut grid.values);
+        grid.wide = params.wide_extent_m.map(|extent_m| {
+            let mut values = vec![UNKNOWN; params.out_cells * params.out_cells];
+            rasterize_scan(scan, &LocalGridParams { extent_m, ..params.clone() }, &mut values);
+            WideGrid { extent_m, values }
+        });
     }
 }
 
@@ -243,5 +263,23 @@ mod tests {
         let row: Vec<f32> = (0..56).map(|c| out[27 * 56 + c].min(out[28 * 56 + c])).collect();
         let darkest = (0..56).min_by(|&a, &b| row[a].total_cmp(&row[b])).unwrap_or(0);
         assert!((16..=17).contains(&darkest), "hit to the left at column {darkest}, row {row:?}");
+    }
+
+    #[test]
+    fn the_wide_grid_is_the_same_scan_over_a_wider_window() {
+        let mut world = World::new();
+        world.insert_resource(LocalGridParams { wide_extent_m: Some(10.0), ..default() });
+        let robot = world.spawn((wall_ahead_scan(), LocalGrid::default())).id();
+        world.run_system_once(local_grid).unwrap();
+        let grid = world.get::<LocalGrid>(robot).unwrap().clone();
+        assert_eq!(grid.values, run().values, "the paper's grid is unchanged");
+        let wide = grid.wide.expect("asked for");
+        let mut want = vec![0.0; 56 * 56];
+        rasterize_scan(&wall_ahead_scan(), &LocalGridParams { extent_m: 10.0, ..default() }, &mut want);
+        assert_eq!((wide.extent_m, &wide.values), (10.0, &want));
+        // The wall 1 m ahead sits half as far from the centre row: row ≈ 28 − 5.6 ≈ 22.
+        let darkest = (0..28).min_by(|&a, &b| want[a * 56 + 28].total_cmp(&want[b * 56 + 28])).unwrap();
+        assert!((21..=23).contains(&darkest), "wall at row {darkest}");
+        assert!(run().wide.is_none(), "no wide grid unless asked");
     }
 }

@@ -10,6 +10,6 @@ mod raycast;
 
 pub use depth::{DepthParams, DepthStrip, depth, depth_strip};
 pub use lidar::{LidarParams, LidarScan, cast_scan, lidar, noise_and_clamp};
-pub use local_grid::{LocalGrid, LocalGridParams, local_grid, rasterize_scan};
+pub use local_grid::{LocalGrid, LocalGridParams, WideGrid, local_grid, rasterize_scan};
 pub use odometry::{Odometry, OdometryParams, noisy_delta, odometry};
 pub use raycast::{RayGrid, cast_reference};

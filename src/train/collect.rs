@@ -2,7 +2,9 @@
 //! or for other tools. Shards of episodes (safetensors, readable from Python: `grids` u8
 //! [E, T, cells, cells], `poses` and `odometry` f32 [E, T, 3] as (x, y, θ), `map` f32 [E] — an
 //! index into the shard's `maps` metadata, comma-separated apartment names, and `depths` f32
-//! [E, T, columns] in metres when the schedule runs the `depth` step) and `manifest.json`.
+//! [E, T, columns] in metres when the schedule runs the `depth` step, `wide_grids` u8 as `grids`
+//! with the window in the `wide_extent_m` metadata when its `local_grid` has one) and
+//! `manifest.json`.
 //! Each shard simulates its own apartments from its own seed, so shards are independent:
 //! a collection stopped midway resumes at the first missing shard.
 
@@ -106,6 +108,7 @@ pub fn collect(
 fn encode_shard(set: &EpisodeSet) -> anyhow::Result<Vec<u8>> {
     let (e, t, c) = (set.episodes.len(), set.steps(), set.grid_cells);
     let grids: Vec<u8> = set.episodes.iter().flat_map(|ep| ep.grids.iter().copied()).collect();
+    let wide_grids: Vec<u8> = set.episodes.iter().flat_map(|ep| ep.wide_grids.iter().copied()).collect();
     let pose_bytes = |pick: fn(&RecordedEpisode) -> &Vec<Pose2>| -> Vec<u8> {
         set.episodes
             .iter()
@@ -126,7 +129,11 @@ fn encode_shard(set: &EpisodeSet) -> anyhow::Result<Vec<u8>> {
     if set.depth_columns > 0 {
         tensors.push(("depths", TensorView::new(Dtype::F32, vec![e, t, set.depth_columns], &depths)?));
     }
-    let metadata = HashMap::from([("maps".to_string(), set.map_names.join(","))]);
+    let mut metadata = HashMap::from([("maps".to_string(), set.map_names.join(","))]);
+    if let Some(extent_m) = set.wide_extent_m {
+        tensors.push(("wide_grids", TensorView::new(Dtype::U8, vec![e, t, c, c], &wide_grids)?));
+        metadata.insert("wide_extent_m".to_string(), extent_m.to_string());
+    }
     Ok(safetensors::serialize(tensors, Some(metadata))?)
 }
 
@@ -147,6 +154,22 @@ pub fn load_collection(dir: &Path) -> anyhow::Result<EpisodeSet> {
             .with_context(|| format!("{}: not a shard", path.display()))?;
         let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)?;
         let names = meta.metadata().as_ref().and_then(|m| m.get("maps")).cloned().unwrap_or_default();
+        let wide_extent_m = match meta.metadata().as_ref().and_then(|m| m.get("wide_extent_m")) {
+            Some(text) => Some(
+                text.parse::<f32>()
+                    .with_context(|| format!("{}: metadata `wide_extent_m`: `{text}`", path.display()))?,
+            ),
+            None => None,
+        };
+        // Shards of a schedule without a wide window hold one grid.
+        let wide_grids = match wide_extent_m {
+            Some(_) => shard
+                .tensor("wide_grids")
+                .with_context(|| format!("{}: tensor `wide_grids`", path.display()))?
+                .data()
+                .to_vec(),
+            None => vec![],
+        };
         let first_map = all.maps.len();
         for name in names.split(',').filter(|n| !n.is_empty()) {
             let seed: u64 = name
@@ -173,11 +196,13 @@ pub fn load_collection(dir: &Path) -> anyhow::Result<EpisodeSet> {
                 poses: (0..t).map(|s| pose(&poses, k * t + s)).collect(),
                 odometry: (0..t).map(|s| pose(&odometry, k * t + s)).collect(),
                 grids: grids.data()[k * t * c * c..(k + 1) * t * c * c].to_vec(),
+                wide_grids: wide_grids.get(k * t * c * c..(k + 1) * t * c * c).unwrap_or_default().to_vec(),
                 depths: depths.get(k * t * columns..(k + 1) * t * columns).unwrap_or_default().to_vec(),
             });
         }
         all.grid_cells = c;
         all.depth_columns = columns;
+        all.wide_extent_m = wide_extent_m;
     }
     Ok(all)
 }

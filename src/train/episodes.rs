@@ -26,6 +26,8 @@ pub struct RecordedEpisode {
     pub odometry: Vec<Pose2>,
     /// The grids, `steps × cells²` values of 0…255 (value / 255 is the network's input).
     pub grids: Vec<u8>,
+    /// The wide grids, as `grids` (empty unless `local_grid` has a `wide_extent_m`).
+    pub wide_grids: Vec<u8>,
     /// The depth strips, `steps × columns` metres (empty without the `depth` step).
     pub depths: Vec<f32>,
 }
@@ -41,6 +43,8 @@ pub struct EpisodeSet {
     pub grid_cells: usize,
     /// Columns of a depth strip (0: none recorded).
     pub depth_columns: usize,
+    /// Window of the wide grids, metres (none recorded: `None`).
+    pub wide_extent_m: Option<f32>,
 }
 
 impl EpisodeSet {
@@ -53,18 +57,19 @@ impl EpisodeSet {
     pub fn extend(&mut self, other: EpisodeSet) -> anyhow::Result<()> {
         anyhow::ensure!(
             self.episodes.is_empty()
-                || (other.grid_cells, other.depth_columns, other.steps())
-                    == (self.grid_cells, self.depth_columns, self.steps()),
-            "episode sets differ in grid side, depth columns or steps: {:?} against {:?}",
-            (other.grid_cells, other.depth_columns, other.steps()),
-            (self.grid_cells, self.depth_columns, self.steps())
+                || (other.grid_cells, other.depth_columns, other.wide_extent_m, other.steps())
+                    == (self.grid_cells, self.depth_columns, self.wide_extent_m, self.steps()),
+            "episode sets differ in grid side, depth columns, wide window or steps: {:?} against {:?}",
+            (other.grid_cells, other.depth_columns, other.wide_extent_m, other.steps()),
+            (self.grid_cells, self.depth_columns, self.wide_extent_m, self.steps())
         );
         let offset = self.maps.len();
         self.maps.extend(other.maps);
         self.map_names.extend(other.map_names);
         self.episodes
             .extend(other.episodes.into_iter().map(|e| RecordedEpisode { map: e.map + offset, ..e }));
-        (self.grid_cells, self.depth_columns) = (other.grid_cells, other.depth_columns);
+        (self.grid_cells, self.depth_columns, self.wide_extent_m) =
+            (other.grid_cells, other.depth_columns, other.wide_extent_m);
         Ok(())
     }
 }
@@ -98,8 +103,15 @@ pub fn simulate_episodes(
         map_names.push(name.0.clone());
     }
     let mut current: Vec<Option<RecordedEpisode>> = vec![None; robots.len()];
-    let mut done =
-        EpisodeSet { maps, map_names, episodes: Vec::with_capacity(count), grid_cells: 0, depth_columns: 0 };
+    let mut done = EpisodeSet {
+        maps,
+        map_names,
+        episodes: Vec::with_capacity(count),
+        grid_cells: 0,
+        depth_columns: 0,
+        wide_extent_m: None,
+    };
+    let to_byte = |v: &f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
     while done.episodes.len() < count {
         app.update();
         let world = app.world();
@@ -113,6 +125,7 @@ pub fn simulate_episodes(
                     poses: vec![],
                     odometry: vec![],
                     grids: vec![],
+                    wide_grids: vec![],
                     depths: vec![],
                 });
             }
@@ -120,8 +133,12 @@ pub fn simulate_episodes(
             episode.poses.push(world.get::<PreviousPose>(robot).context("no PreviousPose")?.0);
             let delta = world.get::<Odometry>(robot).context("no Odometry")?.delta;
             episode.odometry.push(if step == 1 { Pose2::default() } else { delta });
-            episode.grids.extend(grid.values.iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8));
+            episode.grids.extend(grid.values.iter().map(to_byte));
             done.grid_cells = grid.cells;
+            if let Some(wide) = &grid.wide {
+                episode.wide_grids.extend(wide.values.iter().map(to_byte));
+            }
+            done.wide_extent_m = grid.wide.as_ref().map(|wide| wide.extent_m);
             // Robots carry an empty strip unless the schedule runs `depth`.
             let depths = world.get::<DepthStrip>(robot).map_or(&[][..], |strip| &strip.depths_m);
             episode.depths.extend_from_slice(depths);

@@ -13,7 +13,7 @@ use crate::nn::adam::{Adam, AdamConfig};
 use crate::nn::checkpoint::Checkpoint;
 use crate::nn::pfnet::{
     FeatureBank, FeatureCacheSpec, GradBuffers, LocalMapSpec, MapInput, Observation, PfNet, PfNetConfig,
-    PoseLoss, StepBatch, Workspaces, crop_local_maps, depth_image,
+    PoseLoss, StepBatch, WideView, Workspaces, crop_local_map_stack, depth_image,
 };
 use crate::particles::{MapFeatures, map_view};
 use crate::train::collect::load_collection;
@@ -103,6 +103,12 @@ pub struct TrainPfNetConfig {
     /// model: 5 cm better on the depot, worse on the four other real maps, README). The pixel
     /// count stays, so `init`'s weights still fit. Default: the network's.
     pub local_map_cell_m: Option<f32>,
+    /// Beyond the paper: a second, zoomed-out view (`PfNetConfig::wide_view`): the local map
+    /// again at `map_cell_m` pixels and the scan again over `grid_extent_m`, which the collect
+    /// schedule's `local_grid` (or `data`'s) must record as its `wide_extent_m`. An `init`
+    /// without it gains it at zero weight
+    /// (`PfNet::with_wide_view`). Default: none.
+    pub wide_view: Option<WideView>,
 }
 
 /// `episodes` goalnav episodes on `maps` seen apartments of shape `apartment`.
@@ -144,6 +150,7 @@ impl Default for TrainPfNetConfig {
             features: MapFeatures::Exact,
             cache: FeatureCacheSpec::default(),
             local_map_cell_m: None,
+            wide_view: None,
         }
     }
 }
@@ -208,6 +215,15 @@ impl TrainPfNetConfig {
         }
         if let Some(cell_m) = self.local_map_cell_m {
             LocalMapSpec::check_cell_m("local_map_cell_m", cell_m)?;
+        }
+        if self.wide_view.is_some() && self.features == MapFeatures::Cached {
+            return Err(
+                "wide_view: the feature cache encodes one map channel, expected `features: exact`".into()
+            );
+        }
+        if let Some(view) = self.wide_view {
+            let config = PfNetConfig::compact().with_wide_view(Some(view));
+            config.check()?;
         }
         PfNetConfig::named(&self.network)
             .map(|_| ())
@@ -287,6 +303,14 @@ pub fn simulate_data(
             "observation: `{}` reads depth strips, but the episodes of {source} have none: \
              expected a schedule with the `depth` step",
             config.observation.name()
+        );
+        let wide = config.wide_view.map(|view| view.grid_extent_m);
+        anyhow::ensure!(
+            set.wide_extent_m == wide,
+            "wide_view: expected episodes whose wide grid spans {wide:?} m, but those of {source} span \
+             {:?} m: set `local_grid`'s `wide_extent_m` in {} (or the collection's schedule) to match",
+            set.wide_extent_m,
+            config.collect_schedule
         );
     }
     Ok([train, validation])
@@ -370,10 +394,13 @@ impl BatchBuffers {
                 let s = b * t + step;
                 let truth = episode.poses[step];
                 let obs = &mut self.obs[s * model.obs_len()..(s + 1) * model.obs_len()];
-                let (grid_channel, depth_channel) = model.config.observation.split(obs);
-                if let Some(channel) = grid_channel {
-                    let grids = &episode.grids[step * grid..(step + 1) * grid];
-                    channel.iter_mut().zip(grids).for_each(|(o, &g)| *o = f32::from(g) / 255.0);
+                let (grid_channel, depth_channel, wide_channel) = model.config.split_observation(obs);
+                for (channel, grids) in [(grid_channel, &episode.grids), (wide_channel, &episode.wide_grids)]
+                {
+                    if let Some(channel) = channel {
+                        let grids = &grids[step * grid..(step + 1) * grid];
+                        channel.iter_mut().zip(grids).for_each(|(o, &g)| *o = f32::from(g) / 255.0);
+                    }
                 }
                 if let Some(channel) = depth_channel {
                     let columns = data.depth_columns;
@@ -392,7 +419,7 @@ impl BatchBuffers {
                 match config.features {
                     MapFeatures::Exact => {
                         let map = map_view(&data.maps[episode.map]);
-                        crop_local_maps(&map, &xs, &ys, &yaws, &model.config.local_map, out)
+                        crop_local_map_stack(&map, &xs, &ys, &yaws, &model.config.local_maps(), out)
                     }
                     MapFeatures::Cached => banks[episode.map].crop_features(&xs, &ys, &yaws, out),
                 }
@@ -467,6 +494,7 @@ impl TrainState {
         if let Some(cell_m) = config.local_map_cell_m {
             network.local_map.cell_m = cell_m;
         }
+        let network = network.with_wide_view(config.wide_view);
         let model = match &config.init {
             None => PfNet::new(network, config.seed).map_err(anyhow::Error::msg)?,
             Some(path) => {
@@ -476,6 +504,9 @@ impl TrainState {
                 // A pixel's size is in no weight: the same filters read a wider window.
                 if let Some(cell_m) = config.local_map_cell_m {
                     model.config.local_map.cell_m = cell_m;
+                }
+                if let Some(view) = config.wide_view {
+                    model = model.with_wide_view(view).map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
                 }
                 anyhow::ensure!(
                     model.config == network,

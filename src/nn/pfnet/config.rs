@@ -62,6 +62,24 @@ pub struct PfNetConfig {
     pub joint_filters: usize,
     /// LayerNorm epsilon (Keras: 1e-3).
     pub layer_norm_eps: f32,
+    /// Beyond the paper: a zoomed-out second view, one more channel on each side (absent: the
+    /// paper's one view).
+    pub wide_view: Option<WideView>,
+}
+
+/// A second, wider view for open spaces: the particle's local map cropped again with wider
+/// pixels (its last map channel) and the same scan rasterised over a wider window (the
+/// observation's last channel, `local_grid`'s `wide_extent_m`). The paper's grid spans 5 m, so in
+/// a hall whose walls and pillars lie farther away the network sees nothing to match; even MCL's
+/// exact sensor model, given only the beams ending in that window, tracks 3–4 times worse there
+/// (README, a wide view for the halls).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WideView {
+    /// Side of a pixel of the wide local map, metres (same pixel count as `local_map`).
+    pub map_cell_m: f32,
+    /// Side of the wide LiDAR window, metres (same cell count as the observation).
+    pub grid_extent_m: f32,
 }
 
 impl Default for PfNetConfig {
@@ -96,6 +114,7 @@ impl PfNetConfig {
             obs_stage2: vec![ConvBranch::new(16, 3, 1)],
             joint_filters: 8,
             layer_norm_eps: 1e-3,
+            wide_view: None,
         }
     }
 
@@ -127,7 +146,20 @@ impl PfNetConfig {
 
     /// This configuration observing `observation` instead.
     pub fn observing(self, observation: Observation) -> Self {
-        Self { observation, obs_channels: observation.channels(), ..self }
+        let view = self.wide_view;
+        Self { observation, ..self }.with_wide_view(view)
+    }
+
+    /// This configuration with `wide_view` (or without one): the channel counts follow.
+    pub fn with_wide_view(self, wide_view: Option<WideView>) -> Self {
+        let extra = usize::from(wide_view.is_some());
+        Self { wide_view, map_channels: 1 + extra, obs_channels: self.observation.channels() + extra, ..self }
+    }
+
+    /// The local maps a particle sees, one per map channel: the paper's, then the wide view's.
+    pub fn local_maps(&self) -> Vec<LocalMapSpec> {
+        let wide = self.wide_view.map(|view| LocalMapSpec { cell_m: view.map_cell_m, ..self.local_map });
+        std::iter::once(self.local_map).chain(wide).collect()
     }
 
     /// A named configuration (`paper` or `compact`).
@@ -137,6 +169,18 @@ impl PfNetConfig {
             "compact" => Some(Self::compact()),
             _ => None,
         }
+    }
+
+    /// One observation image `[obs_channels][obs_cells²]` split into the grid's channel, the
+    /// depth image's and the wide grid's, each present when observed.
+    #[allow(clippy::type_complexity)]
+    pub fn split_observation<'a>(
+        &self,
+        image: &'a mut [f32],
+    ) -> (Option<&'a mut [f32]>, Option<&'a mut [f32]>, Option<&'a mut [f32]>) {
+        let (sensor, wide) = image.split_at_mut(self.observation.channels() * self.obs_cells.pow(2));
+        let (grid, depth) = self.observation.split(sensor);
+        (grid, depth, self.wide_view.map(|_| wide))
     }
 
     /// `Err("field: expected …")` when the configuration cannot build a network.
@@ -155,16 +199,29 @@ impl PfNetConfig {
                 return Err(format!("{field}: expected filters, kernel and dilation ≥ 1"));
             }
         }
-        if self.map_channels == 0 {
-            return Err("map_channels: expected at least 1".into());
-        }
-        if self.obs_channels != self.observation.channels() {
+        let extra = usize::from(self.wide_view.is_some());
+        if self.map_channels != 1 + extra {
             return Err(format!(
-                "obs_channels: expected {} for observation `{}`, found {}",
-                self.observation.channels(),
+                "map_channels: expected {} ({} wide view), found {}",
+                1 + extra,
+                if extra == 1 { "with a" } else { "without" },
+                self.map_channels
+            ));
+        }
+        if self.obs_channels != self.observation.channels() + extra {
+            return Err(format!(
+                "obs_channels: expected {} for observation `{}`{}, found {}",
+                self.observation.channels() + extra,
                 self.observation.name(),
+                if extra == 1 { " and a wide view" } else { "" },
                 self.obs_channels
             ));
+        }
+        if let Some(view) = self.wide_view {
+            LocalMapSpec::check_cell_m("wide_view.map_cell_m", view.map_cell_m)?;
+            if !(view.grid_extent_m.is_finite() && view.grid_extent_m > 0.0) {
+                return Err(format!("wide_view.grid_extent_m: expected > 0 m, found {}", view.grid_extent_m));
+            }
         }
         if self.local_map.cells * 2 != self.obs_cells
             || !self.local_map.cells.is_multiple_of(4)
@@ -194,6 +251,26 @@ mod tests {
         assert_eq!((two.obs_channels, two.check()), (2, Ok(())));
         let err = PfNetConfig { obs_channels: 1, ..two }.check().unwrap_err();
         assert_eq!(err, "obs_channels: expected 2 for observation `grid_and_depth`, found 1");
+    }
+
+    #[test]
+    fn a_wide_view_adds_a_channel_on_each_side() {
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0 };
+        let wide = PfNetConfig::compact().observing(Observation::GridAndDepth).with_wide_view(Some(view));
+        assert_eq!((wide.map_channels, wide.obs_channels, wide.check()), (2, 3, Ok(())));
+        assert_eq!(wide.local_maps().iter().map(|m| m.cell_m).collect::<Vec<_>>(), [0.1, 0.2]);
+        assert_eq!(wide.clone().observing(Observation::Depth).obs_channels, 2, "the view survives");
+        assert_eq!(
+            wide.clone().with_wide_view(None),
+            PfNetConfig::compact().observing(Observation::GridAndDepth)
+        );
+        let err = PfNetConfig { map_channels: 1, ..wide.clone() }.check().unwrap_err();
+        assert_eq!(err, "map_channels: expected 2 (with a wide view), found 1");
+        let err = PfNetConfig { obs_channels: 2, ..wide.clone() }.check().unwrap_err();
+        assert_eq!(err, "obs_channels: expected 3 for observation `grid_and_depth` and a wide view, found 2");
+        let flat = WideView { grid_extent_m: 0.0, ..view };
+        let err = wide.with_wide_view(Some(flat)).check().unwrap_err();
+        assert_eq!(err, "wide_view.grid_extent_m: expected > 0 m, found 0");
     }
 
     #[test]

@@ -19,12 +19,12 @@ mod train_step;
 mod widen;
 
 pub use batch::{MAP_ENCODER_CHUNK, PARTICLE_CHUNK, Workspaces};
-pub use config::{ConvBranch, PfNetConfig};
+pub use config::{ConvBranch, PfNetConfig, WideView};
 pub use feature_cache::{FeatureBank, FeatureCacheSpec};
 pub use loss::PoseLoss;
 pub use model::{MapInput, ParamCounts, PfNet, Workspace, is_map_encoder_param};
 pub use observation::{DEPTH_BIN_M, Observation, depth_image};
 pub use reference::{ReferenceError, VerifyReport, from_keras_layout, load_reference_model, verify};
 pub use saved::PfNetFileError;
-pub use spatial_transformer::{LocalMapSpec, MapView, crop_local_maps};
+pub use spatial_transformer::{LocalMapSpec, MapView, crop_local_map_stack, crop_local_maps};
 pub use train_step::{GradBuffers, StepBatch};

@@ -130,17 +130,37 @@ pub fn crop_local_maps(
     spec: &LocalMapSpec,
     out: &mut [f32],
 ) {
-    let pixels = spec.cells * spec.cells;
+    crop_local_map_stack(map, xs, ys, yaws, std::slice::from_ref(spec), out);
+}
+
+/// [`crop_local_maps`] at several pixel sizes: one image per spec and pose, `[k][spec][row][col]`
+/// (a network's map channels: `PfNetConfig::local_maps`).
+///
+/// # Panics
+/// As [`crop_local_maps`], with `out.len() != xs.len() · specs.len() · cells²`, or if the specs
+/// differ in `cells`.
+pub fn crop_local_map_stack(
+    map: &MapView,
+    xs: &[f32],
+    ys: &[f32],
+    yaws: &[f32],
+    specs: &[LocalMapSpec],
+    out: &mut [f32],
+) {
+    let cells = specs.first().map_or(0, |spec| spec.cells);
+    assert!(specs.iter().all(|spec| spec.cells == cells), "every map channel has the same side");
+    let pixels = cells * cells;
     assert!(xs.len() == ys.len() && xs.len() == yaws.len(), "one x, y and yaw per pose");
-    assert_eq!(out.len(), xs.len() * pixels, "out holds poses × cells² values");
+    assert_eq!(out.len(), xs.len() * specs.len() * pixels, "out holds poses × channels × cells² values");
     assert_eq!(map.occupancy.len(), map.width * map.height, "map occupancy is width × height");
     assert!(map.resolution_m.is_finite() && map.resolution_m > 0.0, "map resolution must be positive");
     if pixels == 0 {
         return;
     }
     for (k, image) in out.chunks_exact_mut(pixels).enumerate() {
-        let plan = SamplePlan::new(map, xs[k], ys[k], yaws[k], spec);
-        for (r, row) in image.chunks_exact_mut(spec.cells).enumerate() {
+        let (pose, spec) = (k / specs.len(), &specs[k % specs.len()]);
+        let plan = SamplePlan::new(map, xs[pose], ys[pose], yaws[pose], spec);
+        for (r, row) in image.chunks_exact_mut(cells).enumerate() {
             let row_u = plan.first[0] + r as f32 * plan.row_step[0];
             let row_v = plan.first[1] + r as f32 * plan.row_step[1];
             for (c, value) in row.iter_mut().enumerate() {
@@ -436,5 +456,26 @@ mod tests {
                 assert!((got - want).abs() < 2e-4, "pose {k} pixel {p}: got {got}, want {want}");
             }
         }
+    }
+
+    #[test]
+    fn a_stack_holds_each_poses_crops_in_spec_order() {
+        let mut rng = Pcg64::seed_from_u64(7);
+        let mut map = TestMap::free(30, 20);
+        map.occupancy.iter_mut().for_each(|o| *o = rng.random::<f32>());
+        let specs = [LocalMapSpec { cells: 4, cell_m: 0.1 }, LocalMapSpec { cells: 4, cell_m: 0.25 }];
+        let (xs, ys, yaws) = ([0.6, 1.9], [0.4, 1.2], [0.3, -2.0]);
+        let mut stack = vec![f32::NAN; 2 * 2 * 16];
+        crop_local_map_stack(&map.view(), &xs, &ys, &yaws, &specs, &mut stack);
+        for pose in 0..2 {
+            for (c, spec) in specs.iter().enumerate() {
+                let mut one = vec![f32::NAN; 16];
+                let at = pose..=pose;
+                crop_local_maps(&map.view(), &xs[at.clone()], &ys[at.clone()], &yaws[at], spec, &mut one);
+                let image = pose * specs.len() + c;
+                assert_eq!(stack[image * 16..(image + 1) * 16], one[..], "pose {pose}, channel {c}");
+            }
+        }
+        assert_ne!(stack[..16], stack[16..32], "the wider pixels see another window");
     }
 }

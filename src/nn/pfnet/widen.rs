@@ -1,9 +1,11 @@
-//! A one-sensor PF-net as the start of a grid + depth one. Every weight carries over; the
-//! observation encoder's first convolutions read the old sensor's channel with the old weights
-//! and the new sensor's with zeros. The widened network's likelihoods are then the old one's,
-//! whatever the new sensor sees, so training starts from the one-sensor model and can only add
-//! what the second channel tells — where a grid + depth model trained from scratch starts over.
+//! Starting a wider PF-net from a trained one: a one-sensor network as the start of a grid + depth
+//! one, and a one-view network as the start of one with a wide view. Every weight carries over;
+//! the first convolutions read the old channels with the old weights and the new channel with
+//! zeros. The widened network's likelihoods are then the old one's, whatever the new channel
+//! holds, so training starts from the trained model and can only add what the new channel tells,
+//! where a wider model trained from scratch starts over.
 
+use super::config::{PfNetConfig, WideView};
 use super::model::PfNet;
 use super::observation::Observation;
 use crate::nn::conv::widen_input_channels;
@@ -14,25 +16,48 @@ impl PfNet {
     /// channel's are zero).
     ///
     /// # Errors
-    /// Any other pair of observations, naming both.
+    /// Any other pair of observations, naming both; a network with a wide view (its last channel
+    /// would move).
     pub fn widened_to(&self, observation: Observation) -> Result<PfNet, String> {
         let from = self.config.observation;
         if from == observation {
             return Ok(self.clone());
         }
-        let kept_channel = match (from, observation) {
-            (Observation::Grid, Observation::GridAndDepth) => 0,
-            (Observation::Depth, Observation::GridAndDepth) => 1,
+        let kept_channel = match (from, observation, self.config.wide_view) {
+            (Observation::Grid, Observation::GridAndDepth, None) => 0,
+            (Observation::Depth, Observation::GridAndDepth, None) => 1,
             _ => {
                 return Err(format!(
-                    "a `{}` network cannot start a `{}` one; expected a `grid` or `depth` network \
-                     to widen to `grid_and_depth`",
+                    "a `{}` network{} cannot start a `{}` one; expected a `grid` or `depth` network \
+                     without a wide view to widen to `grid_and_depth`",
                     from.name(),
+                    if self.config.wide_view.is_some() { " with a wide view" } else { "" },
                     observation.name()
                 ));
             }
         };
-        let mut wide = PfNet::new(self.config.clone().observing(observation), 0)?;
+        self.carried_into(self.config.clone().observing(observation), kept_channel)
+    }
+
+    /// This network with the wide view `view`: itself if it has it, else a one-view network whose
+    /// first map and observation convolutions gain a last input channel of zero weight.
+    ///
+    /// # Errors
+    /// A network with another wide view, naming both.
+    pub fn with_wide_view(&self, view: WideView) -> Result<PfNet, String> {
+        match self.config.wide_view {
+            Some(have) if have == view => Ok(self.clone()),
+            Some(have) => {
+                Err(format!("a network with the wide view {have:?} cannot start one with {view:?}"))
+            }
+            None => self.carried_into(self.config.clone().with_wide_view(Some(view)), 0),
+        }
+    }
+
+    /// A fresh network of `config` holding this one's weights; where a first convolution has more
+    /// input channels, the old ones sit from channel `kept_channel` on and the others are zero.
+    fn carried_into(&self, config: PfNetConfig, kept_channel: usize) -> Result<PfNet, String> {
+        let mut wide = PfNet::new(config, 0)?;
         let names: Vec<String> = wide.params.specs().map(|(_, s)| s.name.clone()).collect();
         for name in names {
             let id = wide.params.find(&name).expect("listed above");
@@ -42,8 +67,9 @@ impl PfNet {
             let new = wide.params.get_mut(id);
             if *old_shape == shape {
                 new.copy_from_slice(old);
-            } else if let ([c_out, 1, kh, kw], [c_out2, _, kh2, kw2]) = (&old_shape[..], &shape[..])
+            } else if let ([c_out, c_old, kh, kw], [c_out2, c_new, kh2, kw2]) = (&old_shape[..], &shape[..])
                 && (c_out, kh, kw) == (c_out2, kh2, kw2)
+                && kept_channel + c_old <= *c_new
             {
                 widen_input_channels(old, new, *c_out, kh * kw, kept_channel);
             } else {
@@ -58,7 +84,7 @@ impl PfNet {
 mod tests {
     use super::*;
     use crate::nn::gradcheck::test_values;
-    use crate::nn::pfnet::{MapInput, PfNetConfig, Workspace};
+    use crate::nn::pfnet::{MapInput, Workspace};
 
     /// The widened network scores every particle as the one-sensor network did, whatever the
     /// second channel holds; after one change to a depth weight it no longer does.
@@ -94,5 +120,44 @@ mod tests {
         assert!(e.contains("`grid_and_depth` network cannot start a `grid` one"), "{e}");
         let depth = PfNet::new(PfNetConfig::named("compact").unwrap().observing(Observation::Depth), 0);
         assert!(depth.unwrap().widened_to(Observation::GridAndDepth).is_ok());
+    }
+
+    /// A wide view starts out unheard: the widened network scores every particle as the one-view
+    /// one, whatever the wide channels hold; a wide map weight then reaches the likelihoods.
+    #[test]
+    fn a_wide_view_is_silent_until_trained() {
+        let narrow =
+            PfNet::new(PfNetConfig::named("compact").unwrap().observing(Observation::GridAndDepth), 3);
+        let narrow = narrow.unwrap();
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0 };
+        let mut wide = narrow.with_wide_view(view).unwrap();
+        assert_eq!((wide.config.map_channels, wide.config.obs_channels), (2, 3));
+        let (k, side) = (4, narrow.local_map_len());
+        let maps = test_values(k * side, 5);
+        let obs = test_values(narrow.obs_len(), 6);
+        // Each particle's two map channels: its own, then anything.
+        let anything = test_values(side, 8);
+        let wide_maps: Vec<f32> = maps.chunks(side).flat_map(|m| [m, &anything[..]].concat()).collect();
+        let wide_obs: Vec<f32> = obs.iter().copied().chain(test_values(narrow.obs_len() / 2, 7)).collect();
+        let mut ws = Workspace::default();
+        let want = narrow.forward_steps(&obs, (&maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
+        let got = wide.forward_steps(&wide_obs, (&wide_maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
+        assert_eq!(got, want, "zero wide weights: the one-view network's likelihoods");
+
+        let id = (wide.params.specs())
+            .find(|(_, s)| s.name.starts_with("m_") && s.name.ends_with("/kernel"))
+            .map(|(id, _)| id)
+            .unwrap();
+        let taps = wide.params.spec(id).shape[2] * wide.params.spec(id).shape[3];
+        wide.params.get_mut(id)[taps] = 0.5; // output channel 0, wide map channel, first tap
+        let changed =
+            wide.forward_steps(&wide_obs, (&wide_maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
+        assert_ne!(changed, want, "a wide map weight reaches the likelihoods");
+
+        assert_eq!(wide.with_wide_view(view).unwrap().params.get(id), wide.params.get(id), "already wide");
+        let other = WideView { grid_extent_m: 8.0, ..view };
+        assert!(wide.with_wide_view(other).unwrap_err().contains("cannot start one with"));
+        let e = wide.widened_to(Observation::Depth).unwrap_err();
+        assert!(e.contains("with a wide view cannot start"), "{e}");
     }
 }
