@@ -347,6 +347,24 @@ fn train_pfnet_wide_view_starts_from_a_one_view_checkpoint() {
     assert!(set.episodes.iter().all(|e| e.wide_grids.len() == 4 * 56 * 56), "and the wide grids");
 }
 
+/// `apfn pfnet export` keeps a training checkpoint's network and drops Adam's moments.
+#[test]
+fn pfnet_export_writes_the_network_of_a_training_checkpoint() {
+    use apfn::cli::pfnet::{PfNetCommand, run};
+    let dir = tempfile::tempdir().unwrap();
+    let (last, out) = (dir.path().join("last.safetensors"), dir.path().join("model.safetensors"));
+    let state = TrainState::new(&tiny()).unwrap();
+    state.to_checkpoint(&tiny()).save(&last).unwrap();
+    run(PfNetCommand::Export { checkpoint: last.clone(), out: out.clone() }).unwrap();
+    let model = PfNet::load(&out).unwrap();
+    assert_eq!((&model.config, &model.params.values), (&state.model.config, &state.model.params.values));
+    let size = |path: &std::path::Path| std::fs::metadata(path).unwrap().len();
+    assert!(size(&out) * 2 < size(&last), "no optimizer state: {} against {} bytes", size(&out), size(&last));
+    let missing = dir.path().join("none.safetensors");
+    let err = run(PfNetCommand::Export { checkpoint: missing, out }).unwrap_err();
+    assert!(format!("{err:#}").starts_with("--checkpoint"), "{err:#}");
+}
+
 #[test]
 fn collect_is_deterministic_resumable_and_loads_back() {
     use apfn::train::collect::{CollectConfig, Manifest, collect, load_collection};

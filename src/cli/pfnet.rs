@@ -1,5 +1,6 @@
-//! `apfn pfnet info | verify | bench`: PF-net's size, its check against the Keras reference,
-//! and its speed (one filter step or one training step), each printed as one JSON object.
+//! `apfn pfnet info | verify | bench | export`: PF-net's size, its check against the Keras
+//! reference and its speed (one filter step or one training step), each printed as one JSON
+//! object; and a training checkpoint's network alone, the file that ships.
 
 use crate::cli::set_threads;
 use crate::nn::adam::{Adam, AdamConfig};
@@ -32,6 +33,16 @@ pub enum PfNetCommand {
     },
     /// Time one filter step (observation encoder + K likelihoods), or with `--train` one training step.
     Bench(BenchArgs),
+    /// Write a checkpoint's network alone (weights and architecture, no optimizer state): a
+    /// training run's `last.safetensors` becomes a file to ship, a third of its size.
+    Export {
+        /// A PF-net checkpoint, e.g. `runs/…/last.safetensors`.
+        #[arg(long)]
+        checkpoint: PathBuf,
+        /// Where to write the network (atomically).
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 #[derive(clap::Args, Clone, Debug, PartialEq)]
@@ -76,6 +87,12 @@ pub fn run(cmd: PfNetCommand) -> anyhow::Result<()> {
             println!("{}", serde_json::to_string(&report)?);
         }
         PfNetCommand::Bench(args) => bench(&args)?,
+        PfNetCommand::Export { checkpoint, out } => {
+            let model =
+                PfNet::load(&checkpoint).with_context(|| format!("--checkpoint {}", checkpoint.display()))?;
+            model.save(&out).with_context(|| format!("--out {}", out.display()))?;
+            println!("wrote {} ({} parameters)", out.display(), model.params.len());
+        }
     }
     Ok(())
 }
