@@ -84,7 +84,20 @@ impl PfNet {
 mod tests {
     use super::*;
     use crate::nn::gradcheck::test_values;
+    use crate::nn::params::ParamId;
     use crate::nn::pfnet::{MapInput, Workspace};
+
+    /// Sets the first tap of output 0 on input channel 1 of the first convolution named `prefix…`
+    /// to 0.5 and returns that kernel's id.
+    fn nudge_second_channel(model: &mut PfNet, prefix: &str) -> ParamId {
+        let id = (model.params.specs())
+            .find(|(_, s)| s.name.starts_with(prefix) && s.name.ends_with("/kernel"))
+            .map(|(id, _)| id)
+            .unwrap();
+        let taps = model.params.spec(id).shape[2] * model.params.spec(id).shape[3];
+        model.params.get_mut(id)[taps] = 0.5;
+        id
+    }
 
     /// The widened network scores every particle as the one-sensor network did, whatever the
     /// second channel holds; after one change to a depth weight it no longer does.
@@ -103,12 +116,7 @@ mod tests {
         let got = wide.forward_steps(&wide_obs, (&maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
         assert_eq!(got, want, "zero depth weights: the grid network's likelihoods");
 
-        let id = (wide.params.specs())
-            .find(|(_, s)| s.name.starts_with("o_") && s.name.ends_with("/kernel"))
-            .map(|(id, _)| id)
-            .unwrap();
-        let taps = wide.params.spec(id).shape[2] * wide.params.spec(id).shape[3];
-        wide.params.get_mut(id)[taps] = 0.5; // output channel 0, depth channel, first tap
+        nudge_second_channel(&mut wide, "o_"); // the depth channel
         let changed = wide.forward_steps(&wide_obs, (&maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
         assert_ne!(changed, want, "a depth weight reaches the likelihoods");
     }
@@ -144,12 +152,7 @@ mod tests {
         let got = wide.forward_steps(&wide_obs, (&wide_maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
         assert_eq!(got, want, "zero wide weights: the one-view network's likelihoods");
 
-        let id = (wide.params.specs())
-            .find(|(_, s)| s.name.starts_with("m_") && s.name.ends_with("/kernel"))
-            .map(|(id, _)| id)
-            .unwrap();
-        let taps = wide.params.spec(id).shape[2] * wide.params.spec(id).shape[3];
-        wide.params.get_mut(id)[taps] = 0.5; // output channel 0, wide map channel, first tap
+        let id = nudge_second_channel(&mut wide, "m_"); // the wide map channel
         let changed =
             wide.forward_steps(&wide_obs, (&wide_maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
         assert_ne!(changed, want, "a wide map weight reaches the likelihoods");
