@@ -329,6 +329,8 @@ fn train_pfnet_wide_view_starts_from_a_one_view_checkpoint() {
     };
     assert!(wide_map_weights(&model).iter().any(|&w| w != 0.0), "the wide map channel learns");
 
+    let cached = TrainPfNetConfig { features: MapFeatures::Cached, ..wide.clone() };
+    assert!(cached.check().unwrap_err().starts_with("wide_view: the feature cache encodes one map channel"));
     let unfed = TrainPfNetConfig { collect_schedule: narrow.collect_schedule.clone(), ..wide.clone() };
     let err = simulate_data(&unfed, |_, _| {}).unwrap_err().to_string();
     assert!(err.starts_with("wide_view: expected episodes whose wide grid spans Some(10.0) m"), "{err}");

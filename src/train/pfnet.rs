@@ -106,8 +106,7 @@ pub struct TrainPfNetConfig {
     /// Beyond the paper: a second, zoomed-out view (`PfNetConfig::wide_view`): the local map
     /// again at `map_cell_m` pixels and the scan again over `grid_extent_m`, which the collect
     /// schedule's `local_grid` (or `data`'s) must record as its `wide_extent_m`. An `init`
-    /// without it gains it at zero weight
-    /// (`PfNet::with_wide_view`). Default: none.
+    /// without it gains it at zero weight (`PfNet::with_wide_view`). Default: none.
     pub wide_view: Option<WideView>,
 }
 
