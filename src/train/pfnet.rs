@@ -370,6 +370,7 @@ impl BatchBuffers {
         let noise = |rng: &mut _| Pose2::new(pos.sample(rng), pos.sample(rng), rot.sample(rng));
         let wide = (config.wide_fraction * k as f32).round() as usize;
         let half_box = 0.5 * config.wide_box_m;
+        let local_maps = model.config.local_maps();
         for (b, &e) in episodes.iter().enumerate() {
             let episode: &RecordedEpisode = &data.episodes[e];
             let centre = add(episode.poses[0], noise(rng));
@@ -418,7 +419,7 @@ impl BatchBuffers {
                 match config.features {
                     MapFeatures::Exact => {
                         let map = map_view(&data.maps[episode.map]);
-                        crop_local_map_stack(&map, &xs, &ys, &yaws, &model.config.local_maps(), out)
+                        crop_local_map_stack(&map, &xs, &ys, &yaws, &local_maps, out)
                     }
                     MapFeatures::Cached => banks[episode.map].crop_features(&xs, &ys, &yaws, out),
                 }
