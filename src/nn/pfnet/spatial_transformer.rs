@@ -28,7 +28,7 @@
 //! Speed (3,000 particles × 784 pixels per filter step): grid coordinates are affine in (r, c),
 //! so each pose needs its trig once and two step vectors; a pixel is then a few multiply-adds,
 //! a floor and four reads, with a fast path (no per-neighbour bounds tests) when all four
-//! neighbours lie on the map. No allocation.
+//! neighbours lie on the map, 16 pixels per AVX-512 gather where the CPU has it. No allocation.
 
 use serde::{Deserialize, Serialize};
 
@@ -161,14 +161,86 @@ pub fn crop_local_map_stack(
         let (pose, spec) = (k / specs.len(), &specs[k % specs.len()]);
         let plan = SamplePlan::new(map, xs[pose], ys[pose], yaws[pose], spec);
         for (r, row) in image.chunks_exact_mut(cells).enumerate() {
-            let row_u = plan.first[0] + r as f32 * plan.row_step[0];
-            let row_v = plan.first[1] + r as f32 * plan.row_step[1];
-            for (c, value) in row.iter_mut().enumerate() {
-                let u = row_u + c as f32 * plan.col_step[0];
-                let v = row_v + c as f32 * plan.col_step[1];
-                *value = 1.0 - bilinear_occupancy(map, u, v);
-            }
+            let start =
+                [plan.first[0] + r as f32 * plan.row_step[0], plan.first[1] + r as f32 * plan.row_step[1]];
+            sample_row(map, start, plan.col_step, row);
         }
+    }
+}
+
+/// Writes pixel c of `row` from centre coordinates start + c·step.
+fn sample_row(map: &MapView, start: [f32; 2], step: [f32; 2], row: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if is_x86_feature_detected!("avx512f") && fits_gather_indices(map) {
+        // SAFETY: the CPU has AVX-512F.
+        return unsafe { sample_row_avx512(map, start, step, row) };
+    }
+    sample_row_scalar(map, start, step, row);
+}
+
+fn sample_row_scalar(map: &MapView, start: [f32; 2], step: [f32; 2], row: &mut [f32]) {
+    for (c, value) in row.iter_mut().enumerate() {
+        let c = c as f32;
+        *value = 1.0 - bilinear_occupancy(map, start[0] + c * step[0], start[1] + c * step[1]);
+    }
+}
+
+/// Whether every cell index and the map's sides fit the gathers' 32-bit lanes.
+fn fits_gather_indices(map: &MapView) -> bool {
+    let limit = i32::MAX as usize;
+    map.width < limit && map.height < limit && map.occupancy.len() < limit
+}
+
+/// [`sample_row`] 16 pixels at a time (measured: the crop was a quarter of the exact path's time,
+/// scalar): four masked gathers, a neighbour off the map reading [`OFF_MAP_OCCUPANCY`] instead,
+/// then the scalar path's operations in its order (no FMA), so the values are the same bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn sample_row_avx512(map: &MapView, start: [f32; 2], step: [f32; 2], row: &mut [f32]) {
+    use std::arch::x86_64::*;
+    let lane =
+        _mm512_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0);
+    let (start_u, start_v) = (_mm512_set1_ps(start[0]), _mm512_set1_ps(start[1]));
+    let (step_u, step_v) = (_mm512_set1_ps(step[0]), _mm512_set1_ps(step[1]));
+    // The scalar clamp; `max` returns its second operand for NaN, as `f32::max` returns -2.
+    let low = _mm512_set1_ps(-2.0);
+    let (high_u, high_v) = (_mm512_set1_ps(map.width as f32 + 1.0), _mm512_set1_ps(map.height as f32 + 1.0));
+    let (width, height) = (_mm512_set1_epi32(map.width as i32), _mm512_set1_epi32(map.height as i32));
+    let (zero, one_i, one) = (_mm512_setzero_si512(), _mm512_set1_epi32(1), _mm512_set1_ps(1.0));
+    let off_map = _mm512_set1_ps(OFF_MAP_OCCUPANCY);
+    let on_map =
+        |k: __m512i, side: __m512i| _mm512_cmpge_epi32_mask(k, zero) & _mm512_cmplt_epi32_mask(k, side);
+    let cells = map.occupancy.as_ptr();
+    for (chunk, values) in row.chunks_mut(16).enumerate() {
+        let active = ((1u32 << values.len()) - 1) as __mmask16;
+        let c = _mm512_add_ps(lane, _mm512_set1_ps((chunk * 16) as f32));
+        let u = _mm512_min_ps(_mm512_max_ps(_mm512_add_ps(start_u, _mm512_mul_ps(c, step_u)), low), high_u);
+        let v = _mm512_min_ps(_mm512_max_ps(_mm512_add_ps(start_v, _mm512_mul_ps(c, step_v)), low), high_v);
+        let (floor_u, floor_v) = (
+            _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(u),
+            _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(v),
+        );
+        let (i, j) = (_mm512_cvttps_epi32(floor_u), _mm512_cvttps_epi32(floor_v));
+        let (i1, j1) = (_mm512_add_epi32(i, one_i), _mm512_add_epi32(j, one_i));
+        let (left, right) = (active & on_map(i, width), active & on_map(i1, width));
+        let (below, above) = (on_map(j, height), on_map(j1, height));
+        let bottom = _mm512_add_epi32(_mm512_mullo_epi32(j, width), i);
+        let top = _mm512_add_epi32(bottom, width);
+        let gather = |mask: __mmask16, index: __m512i| {
+            // SAFETY: a lane is read only where its neighbour lies on the map, so its index is
+            // below `occupancy.len()`, which fits an i32 (`fits_gather_indices`).
+            unsafe { _mm512_mask_i32gather_ps::<4>(off_map, mask, index, cells) }
+        };
+        let (bottom_left, bottom_right) =
+            (gather(left & below, bottom), gather(right & below, _mm512_add_epi32(bottom, one_i)));
+        let (top_left, top_right) =
+            (gather(left & above, top), gather(right & above, _mm512_add_epi32(top, one_i)));
+        let (fu, fv) = (_mm512_sub_ps(u, floor_u), _mm512_sub_ps(v, floor_v));
+        let bottom = _mm512_add_ps(bottom_left, _mm512_mul_ps(fu, _mm512_sub_ps(bottom_right, bottom_left)));
+        let top = _mm512_add_ps(top_left, _mm512_mul_ps(fu, _mm512_sub_ps(top_right, top_left)));
+        let occupancy = _mm512_add_ps(bottom, _mm512_mul_ps(fv, _mm512_sub_ps(top, bottom)));
+        // SAFETY: the store is masked to the chunk's `values.len()` lanes.
+        unsafe { _mm512_mask_storeu_ps(values.as_mut_ptr(), active, _mm512_sub_ps(one, occupancy)) };
     }
 }
 
@@ -454,6 +526,29 @@ mod tests {
             let want = reference_crop(&map, pose, &spec);
             for (p, (&got, &want)) in out[k * pixels..(k + 1) * pixels].iter().zip(&want).enumerate() {
                 assert!((got - want).abs() < 2e-4, "pose {k} pixel {p}: got {got}, want {want}");
+            }
+        }
+    }
+
+    #[test]
+    fn rows_read_the_same_bits_on_every_path() {
+        // On an AVX-512 machine `sample_row` gathers 16 pixels at once; it must give the scalar
+        // path's bits for rows inside the map, across its edge, far off it and at NaN.
+        let mut rng = Pcg64::seed_from_u64(11);
+        let mut map = TestMap::free(40, 30);
+        map.occupancy.iter_mut().for_each(|o| *o = rng.random::<f32>());
+        for trial in 0..400 {
+            let len = rng.random_range(1..45);
+            let start = match trial % 40 {
+                0 => [f32::NAN, 3.0],
+                _ => [rng.random_range(-5.0..45.0), rng.random_range(-5.0..35.0)],
+            };
+            let step = [rng.random_range(-1.5..1.5), rng.random_range(-1.5..1.5)];
+            let (mut fast, mut scalar) = (vec![0.0; len], vec![0.0; len]);
+            sample_row(&map.view(), start, step, &mut fast);
+            sample_row_scalar(&map.view(), start, step, &mut scalar);
+            for (c, (f, s)) in fast.iter().zip(&scalar).enumerate() {
+                assert_eq!(f.to_bits(), s.to_bits(), "trial {trial} pixel {c}: {f} against {s}");
             }
         }
     }
