@@ -293,7 +293,7 @@ fn train_pfnet_wide_view_starts_from_a_one_view_checkpoint() {
     let dir = tempfile::tempdir().unwrap();
     let init = PfNet::new(PfNetConfig::compact(), 4).unwrap();
     let narrow = TrainPfNetConfig { init: Some(saved(&init, dir.path(), "init")), ..tiny() };
-    let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0 };
+    let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: false };
     let wide = TrainPfNetConfig {
         wide_view: Some(view),
         collect_schedule: "systems/collect_pfnet_wide.ron".into(),
@@ -330,7 +330,12 @@ fn train_pfnet_wide_view_starts_from_a_one_view_checkpoint() {
     assert!(wide_map_weights(&model).iter().any(|&w| w != 0.0), "the wide map channel learns");
 
     let cached = TrainPfNetConfig { features: MapFeatures::Cached, ..wide.clone() };
-    assert!(cached.check().unwrap_err().starts_with("wide_view: the feature cache encodes one map channel"));
+    assert!(
+        cached
+            .check()
+            .unwrap_err()
+            .starts_with("wide_view: the feature cache holds map encoders of one map channel")
+    );
     let unfed = TrainPfNetConfig { collect_schedule: narrow.collect_schedule.clone(), ..wide.clone() };
     let err = simulate_data(&unfed, |_, _| {}).unwrap_err().to_string();
     assert!(err.starts_with("wide_view: expected episodes whose wide grid spans Some(10.0) m"), "{err}");
@@ -350,6 +355,57 @@ fn train_pfnet_wide_view_starts_from_a_one_view_checkpoint() {
 }
 
 /// `apfn pfnet export` keeps a training checkpoint's network and drops Adam's moments.
+/// A wide view with a map encoder of its own starts from a one-view checkpoint as a silent copy
+/// of the paper encoder (the first loss is the one-view network's: its features enter the joint
+/// stage through zero weights, which one step then trains) and trains through the feature cache
+/// too, its banks holding both encoders, the encoders frozen.
+#[test]
+fn train_pfnet_wide_map_encoder_starts_silent_and_trains_through_the_cache() {
+    use apfn::nn::pfnet::WideView;
+    let dir = tempfile::tempdir().unwrap();
+    let init = PfNet::new(PfNetConfig::compact(), 4).unwrap();
+    let narrow = TrainPfNetConfig { init: Some(saved(&init, dir.path(), "init")), ..tiny() };
+    let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
+    let wide = TrainPfNetConfig {
+        wide_view: Some(view),
+        collect_schedule: "systems/collect_pfnet_wide.ron".into(),
+        ..narrow.clone()
+    };
+    let cached = TrainPfNetConfig {
+        features: MapFeatures::Cached,
+        cache: FeatureCacheSpec { orientations: 8, ..Default::default() },
+        ..wide.clone()
+    };
+    cached.check().expect("a wide map encoder of its own is cacheable");
+    let [narrow_train, _] = simulate_data(&narrow, |_, _| {}).unwrap();
+    let [wide_train, _] = simulate_data(&wide, |_, _| {}).unwrap();
+    let pool = Workspaces::for_current_pool();
+    let step = |config: &TrainPfNetConfig, data, banks: &[_]| {
+        let mut state = TrainState::new(config).unwrap();
+        let (mut buffers, mut grads) = (BatchBuffers::default(), GradBuffers::default());
+        let loss = state.train_step(config, (data, banks), &mut buffers, &mut grads, &pool);
+        (loss, state.model)
+    };
+    let (narrow_loss, _) = step(&narrow, &narrow_train, &[]);
+    let (wide_loss, model) = step(&wide, &wide_train, &[]);
+    assert!((wide_loss - narrow_loss).abs() <= 1e-6 * narrow_loss, "{wide_loss} against {narrow_loss}");
+    let quarter = 14 * 14;
+    let (fine, channels) =
+        (init.map_feature_len() / quarter, (model.map_feature_len() + model.obs_feature_len()) / quarter);
+    let id = model.params.find("j_lc3/kernel").unwrap();
+    let on_wide = model.params.get(id).chunks_exact(channels).flat_map(|tap| &tap[fine..2 * fine]);
+    assert!(on_wide.into_iter().any(|&w| w != 0.0), "the joint weights on the wide features learn");
+
+    let state = TrainState::new(&cached).unwrap();
+    let banks = feature_banks(&cached, &state.model, &wide_train, |_| {});
+    let (loss, model) = step(&cached, &wide_train, &banks);
+    assert!(loss.is_finite());
+    for (id, spec) in state.model.params.specs() {
+        let moved = state.model.params.get(id) != model.params.get(id);
+        assert_eq!(moved, !is_map_encoder_param(&spec.name), "{}: only the map encoders stay", spec.name);
+    }
+}
+
 #[test]
 fn pfnet_export_writes_the_network_of_a_training_checkpoint() {
     use apfn::cli::pfnet::{PfNetCommand, run};

@@ -78,10 +78,10 @@ impl StepParams for PfNetLikelihoodParams {
             "a finite number > 0",
         )?;
         let model = shared_model(self)?;
-        match (self.features, model.config.wide_view) {
-            (MapFeatures::Cached, Some(_)) => Err(format!(
-                "features: the checkpoint {} has a wide view (two map channels); the feature cache \
-                 encodes one: expected `exact`",
+        match (self.features, model.config.map_encoder_channels()) {
+            (MapFeatures::Cached, 2) => Err(format!(
+                "features: the checkpoint {} reads its wide view through the paper's map encoder \
+                 (two map channels); the feature cache holds encoders of one: expected `exact`",
                 self.checkpoint.as_deref().unwrap_or("(untrained)")
             )),
             _ => Ok(()),
@@ -325,16 +325,33 @@ mod tests {
     /// `model`'s weights for `POSES` and the observation image `obs`, without the system.
     fn expected_weights(model: &PfNet, obs: &[f32]) -> Vec<f32> {
         let map = NetworkMap::from_fine(&tiny_room(), 0.1);
-        let mut ws = Workspace::default();
-        let (xs, ys, yaws): (Vec<f32>, Vec<f32>, Vec<f32>) = (
-            POSES.iter().map(|p| p.x).collect(),
-            POSES.iter().map(|p| p.y).collect(),
-            POSES.iter().map(|p| p.yaw).collect(),
-        );
+        let (xs, ys, yaws) = pose_columns();
         let mut maps = vec![0.0; 3 * model.local_map_len()];
         crop_local_map_stack(&map_view(&map), &xs, &ys, &yaws, &model.config.local_maps(), &mut maps);
         // The training path: the joint stage on concatenated features, not the system's split one.
-        let loglik = model.forward_steps(obs, (&maps, MapInput::LocalMaps), 1, 3, &mut ws);
+        normalised(model.forward_steps(obs, (&maps, MapInput::LocalMaps), 1, 3, &mut Workspace::default()))
+    }
+
+    /// `expected_weights` through the feature cache, with `orientations` banks.
+    fn expected_cached_weights(model: &PfNet, obs: &[f32], orientations: usize) -> Vec<f32> {
+        let map = NetworkMap::from_fine(&tiny_room(), 0.1);
+        let spec = FeatureCacheSpec { orientations, ..FeatureCacheSpec::default() };
+        let (xs, ys, yaws) = pose_columns();
+        let mut features = vec![0.0; 3 * model.map_feature_len()];
+        FeatureBank::build(model, &map_view(&map), &spec).crop_features(&xs, &ys, &yaws, &mut features);
+        let features = (&features[..], MapInput::Features);
+        normalised(model.forward_steps(obs, features, 1, 3, &mut Workspace::default()))
+    }
+
+    fn pose_columns() -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+        (
+            POSES.iter().map(|p| p.x).collect(),
+            POSES.iter().map(|p| p.y).collect(),
+            POSES.iter().map(|p| p.yaw).collect(),
+        )
+    }
+
+    fn normalised(loglik: &[f32]) -> Vec<f32> {
         let total: f32 = loglik.iter().map(|l| l.exp()).sum();
         loglik.iter().map(|l| l.exp() / total).collect()
     }
@@ -440,7 +457,7 @@ mod tests {
     fn pfnet_likelihood_feeds_a_wide_view_both_windows() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("wide_view.safetensors");
-        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0 };
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: false };
         let model = PfNet::new(PfNetConfig::compact().with_wide_view(Some(view)), 4).unwrap();
         model.save(&path).unwrap();
         let mut world = World::new();
@@ -473,6 +490,34 @@ mod tests {
             err.starts_with("features: the checkpoint") && err.contains("wide_view.safetensors"),
             "{err}"
         );
+    }
+
+    /// A wide view read by a map encoder of its own is cached like the paper's view: the
+    /// system's weights are the training path's on both encoders' bank features.
+    #[test]
+    fn pfnet_likelihood_caches_a_wide_view_of_its_own_encoder() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("own_wide_view.safetensors");
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
+        let model = PfNet::new(PfNetConfig::compact().with_wide_view(Some(view)), 4).unwrap();
+        model.save(&path).unwrap();
+        let checkpoint = Some(path.display().to_string());
+        let params =
+            PfNetLikelihoodParams { checkpoint, features: MapFeatures::Cached, ..Default::default() };
+        params.check().expect("a cacheable wide view");
+        let mut world = World::new();
+        world.insert_resource(params.clone());
+        let map = world.spawn(NetworkMap::from_fine(&tiny_room(), 0.1)).id();
+        let wide_grid =
+            LocalGrid { wide: Some(WideGrid { extent_m: 10.0, values: grid(5).values }), ..grid(0) };
+        let robot = world.spawn((wide_grid, OnMap(map), ParticleSet::from_poses(&POSES))).id();
+        world.run_system_once(pfnet_likelihood).expect("system runs");
+
+        let weights = world.get::<ParticleSet>(robot).unwrap().weights();
+        let obs = [grid(0).values, grid(5).values].concat();
+        let want = expected_cached_weights(&model, &obs, params.orientations);
+        assert!(weights.iter().zip(&want).all(|(w, e)| (w - e).abs() < 1e-5), "{weights:?} vs {want:?}");
+        assert!(weights.iter().any(|&w| (w - 1.0 / 3.0).abs() > 1e-4), "the network tells particles apart");
     }
 
     #[test]

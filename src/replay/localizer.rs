@@ -337,7 +337,7 @@ mod tests {
         use crate::nn::pfnet::{PfNet, PfNetConfig, WideView};
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("wide_view.safetensors");
-        let view = WideView { map_cell_m: 0.2, grid_extent_m: 9.0 };
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 9.0, own_map_encoder: false };
         PfNet::new(PfNetConfig::compact().with_wide_view(Some(view)), 1).unwrap().save(&path).unwrap();
         let pfnet = PfNetLikelihoodParams { checkpoint: Some(path.display().to_string()), ..default() };
         let params = LocalizerParams { model: ReplayModel::Pfnet, pfnet, ..small_radius() };

@@ -215,10 +215,10 @@ impl TrainPfNetConfig {
         if let Some(cell_m) = self.local_map_cell_m {
             LocalMapSpec::check_cell_m("local_map_cell_m", cell_m)?;
         }
-        if self.wide_view.is_some() && self.features == MapFeatures::Cached {
-            return Err(
-                "wide_view: the feature cache encodes one map channel, expected `features: exact`".into()
-            );
+        if self.wide_view.is_some_and(|view| !view.own_map_encoder) && self.features == MapFeatures::Cached {
+            return Err("wide_view: the feature cache holds map encoders of one map channel, expected \
+                 `own_map_encoder: true` or `features: exact`"
+                .into());
         }
         if let Some(view) = self.wide_view {
             let config = PfNetConfig::compact().with_wide_view(Some(view));

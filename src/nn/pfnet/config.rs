@@ -40,7 +40,7 @@ impl ConvBranch {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PfNetConfig {
-    /// Channels of a particle's local map (1: free space).
+    /// Local maps a particle sees, stacked as channels (1: free space; 2 with a wide view).
     pub map_channels: usize,
     /// What the observation image holds (the paper: the LiDAR occupancy grid).
     pub observation: Observation,
@@ -80,6 +80,12 @@ pub struct WideView {
     pub map_cell_m: f32,
     /// Side of the wide LiDAR window, metres (same cell count as the observation).
     pub grid_extent_m: f32,
+    /// The wide local map through a map encoder of its own, whose features join the paper
+    /// encoder's before the joint stage, instead of as a second input channel of the paper's.
+    /// Each encoder then sees one map at one scale, translation-equivariant, so the feature cache
+    /// holds both; mixed in one encoder the two scales shift differently and it holds neither.
+    #[serde(default)]
+    pub own_map_encoder: bool,
 }
 
 impl Default for PfNetConfig {
@@ -154,6 +160,16 @@ impl PfNetConfig {
     pub fn with_wide_view(self, wide_view: Option<WideView>) -> Self {
         let extra = usize::from(wide_view.is_some());
         Self { wide_view, map_channels: 1 + extra, obs_channels: self.observation.channels() + extra, ..self }
+    }
+
+    /// Whether the wide local map has a map encoder of its own (`WideView::own_map_encoder`).
+    pub fn wide_map_encoder(&self) -> bool {
+        self.wide_view.is_some_and(|view| view.own_map_encoder)
+    }
+
+    /// Input channels of each map encoder: every local map into the paper's, or one each.
+    pub fn map_encoder_channels(&self) -> usize {
+        if self.wide_map_encoder() { 1 } else { self.map_channels }
     }
 
     /// The local maps a particle sees, one per map channel: the paper's, then the wide view's.
@@ -255,7 +271,7 @@ mod tests {
 
     #[test]
     fn a_wide_view_adds_a_channel_on_each_side() {
-        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0 };
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: false };
         let wide = PfNetConfig::compact().observing(Observation::GridAndDepth).with_wide_view(Some(view));
         assert_eq!((wide.map_channels, wide.obs_channels, wide.check()), (2, 3, Ok(())));
         assert_eq!(wide.local_maps().iter().map(|m| m.cell_m).collect::<Vec<_>>(), [0.1, 0.2]);
@@ -268,6 +284,19 @@ mod tests {
         assert_eq!(err, "map_channels: expected 2 (with a wide view), found 1");
         let err = PfNetConfig { obs_channels: 2, ..wide.clone() }.check().unwrap_err();
         assert_eq!(err, "obs_channels: expected 3 for observation `grid_and_depth` and a wide view, found 2");
+        assert_eq!(
+            (wide.map_encoder_channels(), wide.wide_map_encoder()),
+            (2, false),
+            "one encoder reads both"
+        );
+        let own = WideView { own_map_encoder: true, ..view };
+        let towers = PfNetConfig::compact().with_wide_view(Some(own));
+        assert_eq!(
+            (towers.map_channels, towers.map_encoder_channels(), towers.wide_map_encoder()),
+            (2, 1, true)
+        );
+        let written: WideView = ron::from_str("(map_cell_m: 0.2, grid_extent_m: 10.0)").unwrap();
+        assert_eq!(written, view, "views written before `own_map_encoder` share one encoder");
         let flat = WideView { grid_extent_m: 0.0, ..view };
         let err = wide.with_wide_view(Some(flat)).check().unwrap_err();
         assert_eq!(err, "wide_view.grid_extent_m: expected > 0 m, found 0");

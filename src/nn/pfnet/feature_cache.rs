@@ -27,6 +27,9 @@
 //! computed at φ_o, not θ) and the sub-cell offset (bilinear at 0.2 m instead of re-pooling; the
 //! `pool_phases` option halves that spacing for 4× the memory).
 //!
+//! With a wide view of its own map encoder (`WideView::own_map_encoder`) each encoder has its
+//! bank, rendered at its own pixel size, and a particle's features are both crops side by side.
+//!
 //! Windows are encoded in tiles with a halo wide enough that every kept feature sees exactly what
 //! a one-shot encoding of the window would: memory stays bounded for large maps (the second
 //! stage's im2col of a 640 × 640 window would take 0.6 GB in the paper network).
@@ -34,7 +37,7 @@
 //! Memory: N × C × (rotated map's bounding box + 2 × 3.2 m margin, at 0.2 m) floats — an 8 × 10 m
 //! apartment at N = 32, C = 8: ≈ 8 MB; a 30 × 50 m warehouse ≈ 85 MB (×4 with `pool_phases`).
 
-use super::map_encoder::MapActivations;
+use super::map_encoder::{MapActivations, MapEncoder};
 use super::model::PfNet;
 use super::spatial_transformer::{LocalMapSpec, MapView, crop_local_maps};
 use rayon::prelude::*;
@@ -82,9 +85,16 @@ struct Orientation {
     features: Vec<f32>,
 }
 
-/// The map encoded at every orientation; see the module doc for the geometry.
+/// The map encoded at every orientation by each of the network's map encoders (the paper's, then
+/// a wide view's own, at its wider pixels); see the module doc for the geometry.
 #[derive(Clone, Debug)]
 pub struct FeatureBank {
+    encoders: Vec<EncoderBank>,
+}
+
+/// One map encoder's bank.
+#[derive(Clone, Debug)]
+struct EncoderBank {
     orientations: Vec<Orientation>,
     channels: usize,
     /// Side of a particle's local map, pixels (n), and one pixel's side δ, metres.
@@ -103,38 +113,34 @@ struct Scratch {
 }
 
 impl FeatureBank {
-    /// Encodes `map` at every orientation with `model`'s map encoder (parallel over orientations
-    /// with rayon; the result does not depend on the thread count).
+    /// Encodes `map` at every orientation with each of `model`'s map encoders (parallel over
+    /// orientations with rayon; the result does not depend on the thread count).
     ///
     /// # Panics
-    /// If `spec.orientations` is 0, the model's map has more than one channel (the spatial
-    /// transformer renders one), or the map view is malformed (see `crop_local_maps`).
+    /// If `spec.orientations` is 0, a map encoder reads more than one local map (the spatial
+    /// transformer renders one: a wide view needs `own_map_encoder`), or the map view is
+    /// malformed (see `crop_local_maps`).
     pub fn build(model: &PfNet, map: &MapView, spec: &FeatureCacheSpec) -> Self {
         Self::build_tiled(model, map, spec, TILE)
     }
 
     fn build_tiled(model: &PfNet, map: &MapView, spec: &FeatureCacheSpec, tile: usize) -> Self {
         assert!(spec.orientations > 0, "a feature bank needs at least one orientation");
-        assert_eq!(model.config.map_channels, 1, "the spatial transformer renders one map channel");
-        let local = model.config.local_map;
-        let half = local.cells / 2;
-        let channels = model.map_feature_len() / (half * half);
-        let orientations = (0..spec.orientations)
-            .into_par_iter()
-            .map_init(Scratch::default, |scratch, o| {
-                let heading = TAU * o as f64 / spec.orientations as f64;
-                encode_orientation(model, map, heading, spec.pool_phases, tile, scratch)
-            })
+        assert_eq!(model.config.map_encoder_channels(), 1, "the spatial transformer renders one map channel");
+        let encoders = (model.map_encoders().zip(model.config.local_maps()))
+            .map(|(encoder, local)| EncoderBank::build((model, encoder), local, map, spec, tile))
             .collect();
-        let pixels_per_cell = if spec.pool_phases { 1.0 } else { 2.0 };
-        Self { orientations, channels, side: local.cells, cell_m: f64::from(local.cell_m), pixels_per_cell }
+        Self { encoders }
     }
 
     /// Bytes held by the feature banks.
     pub fn memory_bytes(&self) -> usize {
-        self.orientations.iter().map(|o| o.features.len() * size_of::<f32>()).sum::<usize>()
-            + size_of::<Self>()
-            + self.orientations.len() * size_of::<Orientation>()
+        size_of::<Self>() + self.encoders.iter().map(EncoderBank::memory_bytes).sum::<usize>()
+    }
+
+    /// Values of one pose's features: every encoder's.
+    fn feature_len(&self) -> usize {
+        self.encoders.iter().map(EncoderBank::feature_len).sum()
     }
 
     /// For each pose (world x, y, yaw) writes its map features into out[k] ([k][channels][n/2][n/2],
@@ -144,18 +150,54 @@ impl FeatureBank {
     /// # Panics
     /// If `xs`, `ys` and `yaws` differ in length or `out.len()` is not poses × feature length.
     pub fn crop_features(&self, xs: &[f32], ys: &[f32], yaws: &[f32], out: &mut [f32]) {
-        let len = self.channels * (self.side / 2).pow(2);
+        let len = self.feature_len();
         assert!(xs.len() == ys.len() && xs.len() == yaws.len(), "one x, y and yaw per pose");
         assert_eq!(out.len(), xs.len() * len, "out holds poses × map feature length");
         if len == 0 {
             return;
         }
         out.par_chunks_mut(CROP_CHUNK * len).enumerate().for_each(|(chunk, block)| {
-            for (k, features) in block.chunks_exact_mut(len).enumerate() {
+            for (k, mut features) in block.chunks_exact_mut(len).enumerate() {
                 let k = chunk * CROP_CHUNK + k;
-                self.crop_one(xs[k], ys[k], yaws[k], features);
+                for bank in &self.encoders {
+                    let (own, rest) = features.split_at_mut(bank.feature_len());
+                    bank.crop_one(xs[k], ys[k], yaws[k], own);
+                    features = rest;
+                }
             }
         });
+    }
+}
+
+impl EncoderBank {
+    fn build(
+        (model, encoder): (&PfNet, &MapEncoder),
+        local: LocalMapSpec,
+        map: &MapView,
+        spec: &FeatureCacheSpec,
+        tile: usize,
+    ) -> Self {
+        let half = local.cells / 2;
+        let channels = encoder.feature_len() / (half * half);
+        let orientations = (0..spec.orientations)
+            .into_par_iter()
+            .map_init(Scratch::default, |scratch, o| {
+                let heading = TAU * o as f64 / spec.orientations as f64;
+                encode_orientation((model, encoder, local), map, heading, spec.pool_phases, tile, scratch)
+            })
+            .collect();
+        let pixels_per_cell = if spec.pool_phases { 1.0 } else { 2.0 };
+        Self { orientations, channels, side: local.cells, cell_m: f64::from(local.cell_m), pixels_per_cell }
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.orientations.iter().map(|o| o.features.len() * size_of::<f32>()).sum::<usize>()
+            + size_of::<Self>()
+            + self.orientations.len() * size_of::<Orientation>()
+    }
+
+    fn feature_len(&self) -> usize {
+        self.channels * (self.side / 2).pow(2)
     }
 
     fn crop_one(&self, x: f32, y: f32, yaw: f32, out: &mut [f32]) {
@@ -210,16 +252,16 @@ impl FeatureBank {
     }
 }
 
-/// Renders the window of heading `heading` (map + margin) and encodes it tile by tile.
+/// Renders the window of heading `heading` (map + margin) at `local`'s pixels and encodes it tile
+/// by tile with `encoder`.
 fn encode_orientation(
-    model: &PfNet,
+    (model, encoder, local): (&PfNet, &MapEncoder, LocalMapSpec),
     map: &MapView,
     heading: f64,
     phases: bool,
     tile: usize,
     s: &mut Scratch,
 ) -> Orientation {
-    let local = model.config.local_map;
     let d = f64::from(local.cell_m);
     // A feature of a particle on the map reaches √(2.8² + 1.4²) ≈ 3.1 m away; two more feature
     // cells keep the second stage's 5 × 5 convolution off the window's edge.
@@ -257,13 +299,12 @@ fn encode_orientation(
     crop_local_maps(map, &[pose[0] as f32], &[pose[1] as f32], &[heading as f32], &spec, &mut s.image);
 
     let (rows, cols) = (px_rows / 2, px_cols / 2);
-    let channels = model.map_feature_len() / (local.cells / 2).pow(2);
+    let channels = encoder.feature_len() / (local.cells / 2).pow(2);
     let (stride, shifts): (usize, &[(usize, usize)]) =
         if phases { (2, &[(0, 0), (0, 1), (1, 0), (1, 1)]) } else { (1, &[(0, 0)]) };
     let (bank_rows, bank_cols) = (rows * stride, cols * stride);
     let mut features = vec![0.0; bank_rows * bank_cols * channels];
     let halo = halo(model);
-    let encoder = model.map_encoder();
     // Shift (a, b): the pool's windows start at pixel (2I + a, 2J + b), bank cell (stride·I + a, stride·J + b).
     for &(a, b) in shifts {
         for r0 in (0..rows).step_by(tile) {
@@ -306,8 +347,8 @@ fn halo(model: &PfNet) -> usize {
 
 #[cfg(test)]
 mod tests {
-    use super::super::config::PfNetConfig;
-    use super::super::map_encoder::MapActivations;
+    use super::super::config::{PfNetConfig, WideView};
+    use super::super::spatial_transformer::crop_local_map_stack;
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
@@ -365,7 +406,7 @@ mod tests {
     /// Exact path: crop each pose's local map, encode it.
     pub(super) fn exact(model: &PfNet, map: &MapView, xs: &[f32], ys: &[f32], yaws: &[f32]) -> Vec<f32> {
         let mut maps = vec![0.0; xs.len() * model.local_map_len()];
-        crop_local_maps(map, xs, ys, yaws, &model.config.local_map, &mut maps);
+        crop_local_map_stack(map, xs, ys, yaws, &model.config.local_maps(), &mut maps);
         let mut features = vec![0.0; xs.len() * model.map_feature_len()];
         model.encode_local_maps(&maps, xs.len(), &mut features, &mut Default::default());
         features
@@ -386,48 +427,70 @@ mod tests {
     #[test]
     fn aligned_pose_matches_exact_path() {
         // A 56-pixel local map has 14 × 14 interior features whose receptive field (29 pixels)
-        // never meets the crop's zero padding; at 28 pixels none does.
-        let config = PfNetConfig {
-            local_map: LocalMapSpec { cells: 56, cell_m: 0.1 },
-            obs_cells: 112,
-            ..PfNetConfig::compact()
-        };
-        let model = PfNet::new(config, 3).unwrap();
-        let map = room(1);
-        for pool_phases in [false, true] {
-            let spec = FeatureCacheSpec { orientations: 8, pool_phases };
-            let bank = FeatureBank::build(&model, &map.view(), &spec);
-            let (n, half, channels) = (56.0, 28, bank.channels);
-            // With every pool phase an odd pixel offset is on the bank's grid too.
-            let (stride, shift) = if pool_phases { (2, 1.0) } else { (1, 0.0) };
-            for o in [0, 3, 6] {
-                let b = &bank.orientations[o];
-                // A pose whose local map's top-left pixel is window pixel (R0, C0): ρ(p) = R0 + n,
-                // κ(p) = C0 + n/2. Pick it near the map's middle.
-                let even = |cells: usize| (2 * (cells / stride / 2)) as f64 - 28.0 + shift;
-                let (r0, c0) = (even(b.rows), even(b.cols));
-                let (rho, kappa) = ((r0 + n) * 0.1, (c0 + n / 2.0) * 0.1);
-                let x = b.corner[0] - rho * b.up[0] + kappa * b.right[0];
-                let y = b.corner[1] - rho * b.up[1] + kappa * b.right[1];
-                let yaw = (TAU * o as f64 / 8.0) as f32;
-                let want = exact(&model, &map.view(), &[x as f32], &[y as f32], &[yaw]);
-                let got = cached(&bank, &model, &[x as f32], &[y as f32], &[yaw]);
-                let mut worst = 0.0f32;
-                for ch in 0..channels {
-                    for i in 7..=20 {
-                        for j in 7..=20 {
-                            let k = (ch * half + i) * half + j;
-                            worst = worst.max((got[k] - want[k]).abs());
-                        }
+        // never meets the crop's zero padding; at 28 pixels none does. With a wide view of its
+        // own encoder, each bank is checked at a pose on its own grid.
+        let wide = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
+        for wide_view in [None, Some(wide)] {
+            let config = PfNetConfig {
+                local_map: LocalMapSpec { cells: 56, cell_m: 0.1 },
+                obs_cells: 112,
+                ..PfNetConfig::compact()
+            };
+            let model = PfNet::new(config.with_wide_view(wide_view), 3).unwrap();
+            let map = room(1);
+            for pool_phases in [false, true] {
+                let spec = FeatureCacheSpec { orientations: 8, pool_phases };
+                let built = FeatureBank::build(&model, &map.view(), &spec);
+                let mut first = 0;
+                for (bank, local) in built.encoders.iter().zip(model.config.local_maps()) {
+                    let what = format!("{spec:?}, {} m pixels", local.cell_m);
+                    assert_aligned_pose_matches(&model, &map, (&built, bank, first), local, &what);
+                    first += bank.feature_len();
+                }
+            }
+        }
+    }
+
+    /// At poses facing a bank's orientations whose local maps sit on its grid, the interior
+    /// features of `bank` (values `first…` of a pose's features) equal the exact path's.
+    fn assert_aligned_pose_matches(
+        model: &PfNet,
+        map: &TestMap,
+        (built, bank, first): (&FeatureBank, &EncoderBank, usize),
+        local: LocalMapSpec,
+        what: &str,
+    ) {
+        let (n, half, d) = (56.0, 28, f64::from(local.cell_m));
+        // With every pool phase an odd pixel offset is on the bank's grid too.
+        let (stride, shift) = if bank.pixels_per_cell == 1.0 { (2, 1.0) } else { (1, 0.0) };
+        for o in [0, 3, 6] {
+            let b = &bank.orientations[o];
+            // A pose whose local map's top-left pixel is window pixel (R0, C0): ρ(p) = R0 + n,
+            // κ(p) = C0 + n/2. Pick it near the map's middle.
+            let even = |cells: usize| (2 * (cells / stride / 2)) as f64 - 28.0 + shift;
+            let (r0, c0) = (even(b.rows), even(b.cols));
+            let (rho, kappa) = ((r0 + n) * d, (c0 + n / 2.0) * d);
+            let x = b.corner[0] - rho * b.up[0] + kappa * b.right[0];
+            let y = b.corner[1] - rho * b.up[1] + kappa * b.right[1];
+            let yaw = (TAU * o as f64 / 8.0) as f32;
+            let want = exact(model, &map.view(), &[x as f32], &[y as f32], &[yaw]);
+            let got = cached(built, model, &[x as f32], &[y as f32], &[yaw]);
+            let (want, got) = (&want[first..][..bank.feature_len()], &got[first..][..bank.feature_len()]);
+            let mut worst = 0.0f32;
+            for ch in 0..bank.channels {
+                for i in 7..=20 {
+                    for j in 7..=20 {
+                        let k = (ch * half + i) * half + j;
+                        worst = worst.max((got[k] - want[k]).abs());
                     }
                 }
-                let scale = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-                assert!(scale > 0.1, "features are not trivially zero");
-                assert!(
-                    worst < 2e-4 * scale.max(1.0),
-                    "{spec:?}, orientation {o}: worst interior difference {worst}"
-                );
             }
+            let scale = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+            assert!(scale > 0.1, "{what}: features are not trivially zero");
+            assert!(
+                worst < 2e-4 * scale.max(1.0),
+                "{what}, orientation {o}: worst interior difference {worst}"
+            );
         }
     }
 
@@ -468,7 +531,8 @@ mod tests {
             let back = m as f32 * spec.cell_m;
             let (x, y) = (xs[k] - back * yaws[k].cos(), ys[k] - back * yaws[k].sin());
             crop_local_maps(map, &[x], &[y], &[yaws[k]], &spec, &mut image);
-            model.map_encoder().forward_sized(&model.params, &image, 1, (side, side), &mut acts);
+            let encoder = model.map_encoders().next().expect("the paper's map encoder");
+            encoder.forward_sized(&model.params, &image, 1, (side, side), &mut acts);
             let full = side / 2;
             for (ch, plane) in features.chunks_exact_mut(half * half).enumerate() {
                 for (i, row) in plane.chunks_exact_mut(half).enumerate() {
@@ -573,13 +637,19 @@ mod tests {
 
     #[test]
     fn building_is_deterministic_and_tiling_is_invisible() {
-        let model = PfNet::new(PfNetConfig::compact(), 7).unwrap();
+        // Both banks of a wide view with a map encoder of its own.
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
+        let model = PfNet::new(PfNetConfig::compact().with_wide_view(Some(view)), 7).unwrap();
         let map = room(3);
         let spec = FeatureCacheSpec { orientations: 4, pool_phases: true };
         let a = FeatureBank::build(&model, &map.view(), &spec);
         let b = FeatureBank::build(&model, &map.view(), &spec);
         let tiny = FeatureBank::build_tiled(&model, &map.view(), &spec, 5);
-        for ((a, b), t) in a.orientations.iter().zip(&b.orientations).zip(&tiny.orientations) {
+        let orientations = |bank: &FeatureBank| -> Vec<Orientation> {
+            bank.encoders.iter().flat_map(|e| e.orientations.clone()).collect()
+        };
+        assert_eq!(orientations(&a).len(), 2 * 4, "each encoder's bank");
+        for ((a, b), t) in orientations(&a).iter().zip(&orientations(&b)).zip(&orientations(&tiny)) {
             assert_eq!(a.features, b.features, "two builds differ");
             let worst = a.features.iter().zip(&t.features).fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
             assert!(worst < 1e-4, "tiles of 5 cells differ from tiles of {TILE} by {worst}");

@@ -16,6 +16,9 @@ const POOL: MaxPool2d = MaxPool2d { kernel: 3, stride: 2, padding: Padding::Same
 
 #[derive(Clone, Debug)]
 pub struct MapEncoder {
+    /// The channels of a particle's stacked local maps it reads: `first..first + channels`.
+    first: usize,
+    channels: usize,
     side: usize,
     convs1: Branches,
     norm1: NormRelu,
@@ -44,12 +47,26 @@ pub struct MapActivations {
 }
 
 impl MapEncoder {
-    pub fn new(params: &mut Params, config: &PfNetConfig, rng: &mut impl Rng) -> Self {
-        let convs1 = Branches::new(params, "m", config.map_channels, &config.map_stage1, rng);
-        let norm1 = NormRelu::new(params, "m_ln1", convs1.channels, config.layer_norm_eps);
-        let convs2 = Branches::new(params, "m2", convs1.channels, &config.map_stage2, rng);
-        let norm2 = NormRelu::new(params, "m_ln2", convs2.channels, config.layer_norm_eps);
-        Self { side: config.local_map.cells, convs1, norm1, convs2, norm2 }
+    /// An encoder of the local-map channels `first..first + config.map_encoder_channels()`,
+    /// its parameters named `{prefix}_c…`, `{prefix}_ln1`, `{prefix}2_c…`, `{prefix}_ln2`.
+    pub fn new(
+        params: &mut Params,
+        config: &PfNetConfig,
+        (prefix, first): (&str, usize),
+        rng: &mut impl Rng,
+    ) -> Self {
+        let (channels, eps) = (config.map_encoder_channels(), config.layer_norm_eps);
+        let convs1 = Branches::new(params, prefix, channels, &config.map_stage1, rng);
+        let norm1 = NormRelu::new(params, &format!("{prefix}_ln1"), convs1.channels, eps);
+        let convs2 = Branches::new(params, &format!("{prefix}2"), convs1.channels, &config.map_stage2, rng);
+        let norm2 = NormRelu::new(params, &format!("{prefix}_ln2"), convs2.channels, eps);
+        Self { first, channels, side: config.local_map.cells, convs1, norm1, convs2, norm2 }
+    }
+
+    /// Particle i's input: its channels of the i-th stack of local maps in `maps`.
+    fn input<'a>(&self, maps: &'a [f32], n: usize, i: usize) -> &'a [f32] {
+        let (stack, pixels) = (maps.len() / n.max(1), self.side * self.side);
+        &maps[i * stack + self.first * pixels..][..self.channels * pixels]
     }
 
     /// Channels × pixels of one particle's features.
@@ -57,7 +74,7 @@ impl MapEncoder {
         self.convs2.channels * (self.side / 2) * (self.side / 2)
     }
 
-    /// maps [n][map_channels][side][side] → acts.features [n][feature_len].
+    /// maps [n][map_channels][side][side] (its channels read) → acts.features [n][feature_len].
     ///
     /// One particle at a time through every layer: its 64 × 28 × 28 first-stage activations
     /// (200 KB) then stay in L2 from the conv through LayerNorm, ReLU and the pool, rather than
@@ -66,7 +83,6 @@ impl MapEncoder {
     pub fn forward(&self, p: &Params, maps: &[f32], n: usize, acts: &mut MapActivations) {
         let (s, h) = (self.side, self.side / 2);
         let (c1, c2) = (self.convs1.channels, self.convs2.channels);
-        let map_len = maps.len() / n.max(1);
         sized(&mut acts.conv1, n * c1 * s * s);
         sized(&mut acts.norm1, c1 * s * s); // one particle's, the backward recomputes its ReLU mask
         sized(&mut acts.stats1, n * s * s * 2);
@@ -79,7 +95,7 @@ impl MapEncoder {
             let a = &mut *acts;
             let (big, small, pooled) = (c1 * s * s, c2 * h * h, c1 * h * h);
             let conv1 = &mut a.conv1[i * big..][..big];
-            self.convs1.forward(p, &maps[i * map_len..][..map_len], 1, (s, s), conv1, &mut a.scratch);
+            self.convs1.forward(p, self.input(maps, n, i), 1, (s, s), conv1, &mut a.scratch);
             let norm1 = &mut a.norm1[..big];
             self.norm1.forward(p, conv1, 1, s * s, norm1, &mut a.stats1[i * s * s * 2..][..s * s * 2]);
             let pooled_i = &mut a.pooled[i * pooled..][..pooled];
@@ -110,7 +126,6 @@ impl MapEncoder {
         let (s, h) = (self.side, self.side / 2);
         let (c1, c2) = (self.convs1.channels, self.convs2.channels);
         let (big, small, pooled) = (c1 * s * s, c2 * h * h, c1 * h * h);
-        let map_len = maps.len() / n.max(1);
         let a = acts;
         for i in 0..n {
             sized(&mut a.grad_a, small); // d conv2 (written by the norm)
@@ -128,8 +143,16 @@ impl MapEncoder {
             sized(&mut a.grad_a, big); // d conv1 (written by the norm)
             let conv1 = &a.conv1[i * big..][..big];
             self.norm1.backward(p, conv1, stats1, &a.grad_c, 1, s * s, grads, &mut a.grad_a);
-            let map = &maps[i * map_len..][..map_len];
-            self.convs1.backward(p, map, 1, (s, s), &a.grad_a, grads, None, &mut a.scratch);
+            self.convs1.backward(
+                p,
+                self.input(maps, n, i),
+                1,
+                (s, s),
+                &a.grad_a,
+                grads,
+                None,
+                &mut a.scratch,
+            );
         }
     }
 

@@ -18,6 +18,9 @@ pub struct PfNet {
     pub config: PfNetConfig,
     pub params: Params,
     map: MapEncoder,
+    /// The wide local map's own encoder (`WideView::own_map_encoder`), its features after the
+    /// paper encoder's.
+    wide_map: Option<MapEncoder>,
     obs: ObsEncoder,
     joint: Joint,
 }
@@ -37,6 +40,9 @@ pub enum MapInput {
 #[derive(Clone, Debug, Default)]
 pub struct StepActivations {
     pub map: MapActivations,
+    pub wide_map: MapActivations,
+    /// Both encoders' features side by side, [n][map_feature_len] (with a wide map encoder).
+    map_features: Vec<f32>,
     pub obs: ObsActivations,
     pub joint: JointActivations,
 }
@@ -49,6 +55,8 @@ pub struct Workspace {
     pub chunk_map_features: Vec<f32>,
     grad_map_features: Vec<f32>,
     grad_obs_features: Vec<f32>,
+    /// grad_map_features split between the two map encoders.
+    grad_split: [Vec<f32>; 2],
 }
 
 /// Parameter counts per part.
@@ -69,12 +77,15 @@ impl PfNet {
         config.check()?;
         let mut rng = Pcg64Mcg::seed_from_u64(seed);
         let mut params = Params::new();
-        let map = MapEncoder::new(&mut params, &config, &mut rng);
+        let map = MapEncoder::new(&mut params, &config, ("m", 0), &mut rng);
+        let wide_map =
+            config.wide_map_encoder().then(|| MapEncoder::new(&mut params, &config, ("mw", 1), &mut rng));
         let obs = ObsEncoder::new(&mut params, &config, &mut rng);
-        let map_channels = map.feature_len() / quarter(&config);
+        let map_features = map.feature_len() + wide_map.as_ref().map_or(0, MapEncoder::feature_len);
+        let map_channels = map_features / quarter(&config);
         let obs_channels = obs.feature_len() / quarter(&config);
         let joint = Joint::new(&mut params, &config, map_channels, obs_channels, &mut rng);
-        Ok(Self { config, params, map, obs, joint })
+        Ok(Self { config, params, map, wide_map, obs, joint })
     }
 
     pub fn param_counts(&self) -> ParamCounts {
@@ -101,7 +112,7 @@ impl PfNet {
         self.config.obs_channels * self.config.obs_cells.pow(2)
     }
     pub fn map_feature_len(&self) -> usize {
-        self.map.feature_len()
+        self.map_encoders().map(MapEncoder::feature_len).sum()
     }
     pub fn obs_feature_len(&self) -> usize {
         self.obs.feature_len()
@@ -124,8 +135,59 @@ impl PfNet {
 
     /// local maps [n][local_map_len] → features [n][map_feature_len].
     pub fn encode_local_maps(&self, maps: &[f32], n: usize, features: &mut [f32], ws: &mut Workspace) {
-        self.map.forward(&self.params, maps, n, &mut ws.acts.map);
-        features.copy_from_slice(&ws.acts.map.features[..n * self.map_feature_len()]);
+        let acts = &mut ws.acts;
+        features.copy_from_slice(self.encode_maps(
+            maps,
+            n,
+            (&mut acts.map, &mut acts.wide_map, &mut acts.map_features),
+        ));
+    }
+
+    /// The map encoders over `n` particles' local maps → [n][map_feature_len], each particle's
+    /// features of the paper encoder, then the wide map encoder's.
+    fn encode_maps<'a>(
+        &self,
+        maps: &[f32],
+        n: usize,
+        (fine_acts, wide_acts, both): (&'a mut MapActivations, &'a mut MapActivations, &'a mut Vec<f32>),
+    ) -> &'a [f32] {
+        self.map.forward(&self.params, maps, n, fine_acts);
+        let Some(wide) = &self.wide_map else { return &fine_acts.features[..n * self.map.feature_len()] };
+        wide.forward(&self.params, maps, n, wide_acts);
+        let (fine_len, wide_len) = (self.map.feature_len(), wide.feature_len());
+        sized(both, n * (fine_len + wide_len));
+        let parts = fine_acts.features.chunks_exact(fine_len).zip(wide_acts.features.chunks_exact(wide_len));
+        for (out, (fine, far)) in both.chunks_exact_mut(fine_len + wide_len).zip(parts) {
+            out[..fine_len].copy_from_slice(fine);
+            out[fine_len..].copy_from_slice(far);
+        }
+        both
+    }
+
+    /// The map encoders' backward from d loss / d features [n][map_feature_len] (`encode_maps`).
+    fn backward_maps(
+        &self,
+        maps: &[f32],
+        n: usize,
+        dfeatures: &[f32],
+        grads: &mut [f32],
+        ws: &mut Workspace,
+    ) {
+        let (p, acts) = (&self.params, &mut ws.acts);
+        let Some(wide) = &self.wide_map else {
+            return self.map.backward(p, maps, n, &mut acts.map, dfeatures, grads);
+        };
+        let (fine_len, wide_len) = (self.map.feature_len(), wide.feature_len());
+        let [dfine, dwide] = &mut ws.grad_split;
+        sized(dfine, n * fine_len);
+        sized(dwide, n * wide_len);
+        let split = dfine.chunks_exact_mut(fine_len).zip(dwide.chunks_exact_mut(wide_len));
+        for (both, (fine, far)) in dfeatures.chunks_exact(fine_len + wide_len).zip(split) {
+            fine.copy_from_slice(&both[..fine_len]);
+            far.copy_from_slice(&both[fine_len..]);
+        }
+        self.map.backward(p, maps, n, &mut acts.map, dfine, grads);
+        wide.backward(p, maps, n, &mut acts.wide_map, dwide, grads);
     }
 
     /// The joint stage for `owner.len()` particles: map features [n][map_feature_len], and
@@ -160,8 +222,7 @@ impl PfNet {
         self.obs.forward(p, obs, steps, &mut acts.obs);
         let map_features = match input {
             MapInput::LocalMaps => {
-                self.map.forward(p, maps, n, &mut acts.map);
-                &acts.map.features
+                self.encode_maps(maps, n, (&mut acts.map, &mut acts.wide_map, &mut acts.map_features))
             }
             MapInput::Features => maps,
         };
@@ -188,19 +249,24 @@ impl PfNet {
         grads: &mut [f32],
         ws: &mut Workspace,
     ) {
-        let (p, acts, n) = (&self.params, &mut ws.acts, steps * k);
-        let (dmap, dobs) = (&mut ws.grad_map_features, &mut ws.grad_obs_features);
-        sized(dmap, n * self.map_feature_len());
+        let (p, n) = (&self.params, steps * k);
+        let mut dmap = std::mem::take(&mut ws.grad_map_features);
+        let (acts, dobs) = (&mut ws.acts, &mut ws.grad_obs_features);
+        sized(&mut dmap, n * self.map_feature_len());
         sized(dobs, steps * self.obs_feature_len());
         let map_features = match input {
-            MapInput::LocalMaps => &acts.map.features[..n * self.map_feature_len()],
+            MapInput::LocalMaps => match self.wide_map {
+                Some(_) => &acts.map_features,
+                None => &acts.map.features[..n * self.map_feature_len()],
+            },
             MapInput::Features => maps,
         };
-        self.joint.backward(p, map_features, (steps, k), &mut acts.joint, dloglik, grads, dmap, dobs);
-        if input == MapInput::LocalMaps {
-            self.map.backward(p, maps, n, &mut acts.map, dmap, grads);
-        }
+        self.joint.backward(p, map_features, (steps, k), &mut acts.joint, dloglik, grads, &mut dmap, dobs);
         self.obs.backward(p, obs, steps, &mut acts.obs, dobs, grads);
+        if input == MapInput::LocalMaps {
+            self.backward_maps(maps, n, &dmap, grads, ws);
+        }
+        ws.grad_map_features = dmap;
     }
 
     /// One filter step on its own: forward, `loss` turns the log-likelihoods into (loss,
@@ -220,15 +286,15 @@ impl PfNet {
         value
     }
 
-    /// The map encoder itself, for the feature cache's whole-map windows.
-    pub(super) fn map_encoder(&self) -> &MapEncoder {
-        &self.map
+    /// The map encoders, the paper's first, for the feature cache's whole-map windows.
+    pub(super) fn map_encoders(&self) -> impl Iterator<Item = &MapEncoder> {
+        std::iter::once(&self.map).chain(&self.wide_map)
     }
 }
 
-/// Whether the parameter `name` belongs to the map encoder (the part `MapInput::Features` freezes).
+/// Whether the parameter `name` belongs to a map encoder (the part `MapInput::Features` freezes).
 pub fn is_map_encoder_param(name: &str) -> bool {
-    name.starts_with("m_") || name.starts_with("m2_")
+    ["m_", "m2_", "mw_", "mw2_"].iter().any(|prefix| name.starts_with(prefix))
 }
 
 /// Pixels of a feature map where the two encoders meet (paper: 14 × 14).

@@ -174,7 +174,7 @@ impl PfNet {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::pfnet::{PfNetConfig, is_map_encoder_param};
+    use crate::nn::pfnet::{PfNetConfig, WideView, is_map_encoder_param};
 
     /// A tiny random batch: 6 steps × 4 particles (2 sequences of 3 unless told otherwise).
     struct TestBatch {
@@ -328,5 +328,65 @@ mod tests {
             (numeric - analytic).abs() <= 2e-2 * numeric.abs().max(1e-6),
             "d loss / d j_out/kernel[7]: analytic {analytic:e} vs numeric {numeric:e}"
         );
+    }
+
+    /// With a wide view of its own map encoder a particle's features are both encoders' side by
+    /// side, and each encoder must get the gradient of its own half. As widening leaves it (the
+    /// wide half unweighed), the paper encoder's gradient is the one-view network's and the wide
+    /// one's zero; made symmetric (both local maps one image, the wide encoder the paper one's copy,
+    /// as widening starts it, and both halves weighed alike) the two gradients are equal.
+    #[test]
+    fn each_map_encoder_gets_the_gradient_of_its_own_features() {
+        let narrow = PfNet::new(PfNetConfig::compact(), 2).unwrap();
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
+        let mut wide = narrow.with_wide_view(view).unwrap();
+        let data = TestBatch::new(&narrow);
+        let twice = |values: &[f32], len: usize| -> Vec<f32> {
+            values.chunks(len).flat_map(|v| [v, v].concat()).collect()
+        };
+        let wide_data = TestBatch {
+            obs: twice(&data.obs, narrow.obs_len()),
+            maps: twice(&data.maps, narrow.local_map_len()),
+            states: data.states.clone(),
+            targets: data.targets.clone(),
+        };
+        let pool = Workspaces::for_current_pool();
+        let gradient = |model: &PfNet, data: &TestBatch| {
+            let mut grads = GradBuffers::default();
+            model.batch_gradient(&data.batch(3), &LOSS, &mut grads, &pool);
+            grads.total
+        };
+        let of = |model: &PfNet, grads: &[f32], name: &str| {
+            grads[model.params.range(model.params.find(name).unwrap())].to_vec()
+        };
+        let assert_close = |a: &[f32], b: &[f32], what: &str| {
+            let scale = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+            let worst = a.iter().zip(b).fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+            assert!(scale > 0.0 && worst <= 1e-4 * scale, "{what}: differ by {worst} at scale {scale}");
+        };
+        let names = ["m_c3/kernel", "m_c7d3/bias", "m_ln1/gamma", "m2_c5/kernel", "m_ln2/beta"];
+
+        let (one_view, unweighed) = (gradient(&narrow, &data), gradient(&wide, &wide_data));
+        for name in names {
+            assert_close(&of(&wide, &unweighed, name), &of(&narrow, &one_view, name), name);
+            let copy = format!("mw{}", &name[1..]);
+            assert!(of(&wide, &unweighed, &copy).iter().all(|&g| g == 0.0), "{copy}: unweighed, no gradient");
+        }
+
+        let quarter = (narrow.config.local_map.cells / 2).pow(2);
+        let fine = narrow.map_feature_len() / quarter;
+        let channels = (wide.map_feature_len() + wide.obs_feature_len()) / quarter;
+        for layer in ["j_lc3/kernel", "j_lc5/kernel"] {
+            let id = wide.params.find(layer).unwrap();
+            for tap in wide.params.get_mut(id).chunks_exact_mut(channels) {
+                let (paper, rest) = tap.split_at_mut(fine);
+                rest[..fine].copy_from_slice(paper);
+            }
+        }
+        let symmetric = gradient(&wide, &wide_data);
+        for name in names {
+            let copy = format!("mw{}", &name[1..]);
+            assert_close(&of(&wide, &symmetric, &copy), &of(&wide, &symmetric, name), &copy);
+        }
     }
 }

@@ -55,13 +55,19 @@ impl PfNet {
     }
 
     /// A fresh network of `config` holding this one's weights; where a first convolution has more
-    /// input channels, the old ones sit from channel `kept_channel` on and the others are zero.
+    /// input channels, the old ones sit from channel `kept_channel` on and the others are zero. A
+    /// wide map encoder of its own starts as a copy of the paper one, its features reaching the
+    /// joint stage through zero weights.
     fn carried_into(&self, config: PfNetConfig, kept_channel: usize) -> Result<PfNet, String> {
         let mut wide = PfNet::new(config, 0)?;
+        let quarter = (self.config.local_map.cells / 2).pow(2);
+        let joint_channels = |net: &PfNet| (net.map_feature_len() + net.obs_feature_len()) / quarter;
+        let (c_old, c_new) = (joint_channels(self), joint_channels(&wide));
         let names: Vec<String> = wide.params.specs().map(|(_, s)| s.name.clone()).collect();
         for name in names {
             let id = wide.params.find(&name).expect("listed above");
-            let old_id = self.params.find(&name).ok_or_else(|| format!("`{name}` missing"))?;
+            let source = name.strip_prefix("mw").map_or_else(|| name.clone(), |rest| format!("m{rest}"));
+            let old_id = self.params.find(&source).ok_or_else(|| format!("`{source}` missing"))?;
             let (old_shape, shape) = (&self.params.spec(old_id).shape, wide.params.spec(id).shape.clone());
             let old = self.params.get(old_id);
             let new = wide.params.get_mut(id);
@@ -72,11 +78,28 @@ impl PfNet {
                 && kept_channel + c_old <= *c_new
             {
                 widen_input_channels(old, new, *c_out, kh * kw, kept_channel);
+            } else if let ([.., old_patch], [.., patch]) = (&old_shape[..], &shape[..])
+                && name.starts_with("j_lc")
+                && old_shape.len() == shape.len()
+                && old_patch * c_new == patch * c_old
+            {
+                widen_joint_map_channels(old, new, (c_old, c_new), self.map_feature_len() / quarter);
             } else {
                 return Err(format!("`{name}`: shape {old_shape:?} does not widen to {shape:?}"));
             }
         }
         Ok(wide)
+    }
+}
+
+/// A locally-connected kernel whose patches (`(kh, kw, c)`, `c_old` channels, map features
+/// first) gain map channels: old channel c < `map` stays c, the rest move up by c_new − c_old,
+/// and the channels in between are zero.
+fn widen_joint_map_channels(old: &[f32], new: &mut [f32], (c_old, c_new): (usize, usize), map: usize) {
+    new.fill(0.0);
+    for (old, new) in old.chunks_exact(c_old).zip(new.chunks_exact_mut(c_new)) {
+        new[..map].copy_from_slice(&old[..map]);
+        new[map + c_new - c_old..].copy_from_slice(&old[map..]);
     }
 }
 
@@ -137,7 +160,7 @@ mod tests {
         let narrow =
             PfNet::new(PfNetConfig::named("compact").unwrap().observing(Observation::GridAndDepth), 3);
         let narrow = narrow.unwrap();
-        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0 };
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: false };
         let mut wide = narrow.with_wide_view(view).unwrap();
         assert_eq!((wide.config.map_channels, wide.config.obs_channels), (2, 3));
         let (k, side) = (4, narrow.local_map_len());
@@ -162,5 +185,50 @@ mod tests {
         assert!(wide.with_wide_view(other).unwrap_err().contains("cannot start one with"));
         let e = wide.widened_to(Observation::Depth).unwrap_err();
         assert!(e.contains("with a wide view cannot start"), "{e}");
+    }
+
+    /// A wide map encoder of its own starts as a copy of the paper one and unheard: the widened
+    /// network scores every particle as the one-view one (to rounding); its joint weights then
+    /// reach them.
+    #[test]
+    fn a_wide_map_encoder_starts_as_a_silent_copy() {
+        let narrow = PfNet::new(PfNetConfig::named("compact").unwrap(), 3).unwrap();
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
+        let mut wide = narrow.with_wide_view(view).unwrap();
+        assert_eq!((wide.config.map_channels, wide.config.obs_channels), (2, 2));
+        assert_eq!(wide.map_feature_len(), 2 * narrow.map_feature_len());
+        for (name, copy) in
+            [("m_c3/kernel", "mw_c3/kernel"), ("m2_c5/bias", "mw2_c5/bias"), ("m_ln2/gamma", "mw_ln2/gamma")]
+        {
+            let (a, b) = (narrow.params.find(name).unwrap(), wide.params.find(copy).unwrap());
+            assert_eq!(narrow.params.get(a), wide.params.get(b), "{copy} starts as {name}");
+        }
+        let (k, side) = (4, narrow.local_map_len());
+        let maps = test_values(k * side, 5);
+        let anything = test_values(side, 8);
+        let wide_maps: Vec<f32> = maps.chunks(side).flat_map(|m| [m, &anything[..]].concat()).collect();
+        let obs = test_values(narrow.obs_len(), 6);
+        let wide_obs: Vec<f32> = obs.iter().copied().chain(test_values(narrow.obs_len(), 7)).collect();
+        let mut ws = Workspace::default();
+        let want = narrow.forward_steps(&obs, (&maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
+        let got = wide.forward_steps(&wide_obs, (&wide_maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
+        // To rounding: the joint stage's products now run over twice the map channels.
+        let close = got.iter().zip(&want).all(|(g, w)| (g - w).abs() <= 1e-6 * w.abs().max(1.0));
+        assert!(
+            close,
+            "zero joint weights on the wide features: the one-view likelihoods, {got:?} against {want:?}"
+        );
+
+        // Every tap's wide-feature channels (after the 4 fine ones) of the 3 × 3 layer.
+        let quarter = (narrow.config.local_map.cells / 2).pow(2);
+        let (fine, channels) =
+            (narrow.map_feature_len() / quarter, (wide.map_feature_len() + wide.obs_feature_len()) / quarter);
+        let id = wide.params.find("j_lc3/kernel").unwrap();
+        for tap in wide.params.get_mut(id).chunks_exact_mut(channels) {
+            tap[fine..2 * fine].fill(0.1);
+        }
+        let changed =
+            wide.forward_steps(&wide_obs, (&wide_maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
+        assert_ne!(changed, want, "the wide encoder's features reach the likelihoods");
     }
 }
