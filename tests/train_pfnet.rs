@@ -413,13 +413,22 @@ fn pfnet_export_writes_the_network_of_a_training_checkpoint() {
     let (last, out) = (dir.path().join("last.safetensors"), dir.path().join("model.safetensors"));
     let state = TrainState::new(&tiny()).unwrap();
     state.to_checkpoint(&tiny()).save(&last).unwrap();
-    run(PfNetCommand::Export { checkpoint: last.clone(), out: out.clone() }).unwrap();
+    run(PfNetCommand::Export { checkpoint: last.clone(), out: out.clone(), half: false }).unwrap();
     let model = PfNet::load(&out).unwrap();
     assert_eq!((&model.config, &model.params.values), (&state.model.config, &state.model.params.values));
     let size = |path: &std::path::Path| std::fs::metadata(path).unwrap().len();
     assert!(size(&out) * 2 < size(&last), "no optimizer state: {} against {} bytes", size(&out), size(&last));
+
+    let small = dir.path().join("half.safetensors");
+    run(PfNetCommand::Export { checkpoint: last.clone(), out: small.clone(), half: true }).unwrap();
+    let rounded = PfNet::load(&small).unwrap();
+    assert!(size(&small) * 10 < size(&out) * 6, "F16: {} against {} bytes", size(&small), size(&out));
+    let near = (rounded.params.values.iter().zip(&model.params.values))
+        .all(|(r, w)| (r - w).abs() <= w.abs() / 2048.0 + 3e-8);
+    assert!(near && rounded.config == model.config, "each weight rounded to half precision");
+
     let missing = dir.path().join("none.safetensors");
-    let err = run(PfNetCommand::Export { checkpoint: missing, out }).unwrap_err();
+    let err = run(PfNetCommand::Export { checkpoint: missing, out, half: false }).unwrap_err();
     assert!(format!("{err:#}").starts_with("--checkpoint"), "{err:#}");
 }
 

@@ -4,6 +4,7 @@
 
 use crate::cli::set_threads;
 use crate::nn::adam::{Adam, AdamConfig};
+use crate::nn::checkpoint::{Checkpoint, Storage};
 use crate::nn::pfnet::{
     FeatureBank, FeatureCacheSpec, GradBuffers, MapInput, PfNet, PfNetConfig, PoseLoss, StepBatch,
     Workspaces, verify,
@@ -42,6 +43,9 @@ pub enum PfNetCommand {
         /// Where to write the network (atomically).
         #[arg(long)]
         out: PathBuf,
+        /// Store the weights as F16: half the size, each weight rounded to 11 significant bits.
+        #[arg(long)]
+        half: bool,
     },
 }
 
@@ -87,11 +91,13 @@ pub fn run(cmd: PfNetCommand) -> anyhow::Result<()> {
             println!("{}", serde_json::to_string(&report)?);
         }
         PfNetCommand::Bench(args) => bench(&args)?,
-        PfNetCommand::Export { checkpoint, out } => {
+        PfNetCommand::Export { checkpoint, out, half } => {
             let model =
                 PfNet::load(&checkpoint).with_context(|| format!("--checkpoint {}", checkpoint.display()))?;
-            model.save(&out).with_context(|| format!("--out {}", out.display()))?;
-            println!("wrote {} ({} parameters)", out.display(), model.params.len());
+            let storage = if half { Storage::F16 } else { Storage::F32 };
+            let file = Checkpoint { storage, ..model.to_checkpoint(Default::default()) };
+            file.save(&out).with_context(|| format!("--out {}", out.display()))?;
+            println!("wrote {} ({} parameters, {storage:?})", out.display(), model.params.len());
         }
     }
     Ok(())

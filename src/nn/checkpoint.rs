@@ -1,4 +1,5 @@
-//! Checkpoints as safetensors files (readable from Python): f32 tensors plus string metadata.
+//! Checkpoints as safetensors files (readable from Python): f32 tensors plus string metadata,
+//! stored as F32 or, to ship a trained network at half the size, F16.
 //! Weights, Adam moments, … of a [`Params`] arena go in as tensors named `prefix + spec.name`.
 //! Files are written atomically (temp file in the same directory, fsync, rename).
 
@@ -21,12 +22,27 @@ pub struct NamedTensor {
     pub data: Vec<f32>,
 }
 
+/// How a checkpoint's tensors are stored in the file; in memory they are f32 either way.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Storage {
+    /// IEEE single precision: every value bit for bit (training state, resume).
+    #[default]
+    F32,
+    /// IEEE half precision: half the bytes, each value rounded to 11 significant bits (relative
+    /// error ≤ 2⁻¹¹ from 6.1e-5 up to the largest half, 65,504; below, absolute ≤ 3e-8). For a
+    /// trained network to ship.
+    F16,
+}
+
 /// The contents of a checkpoint file. Tensors come back from [`Checkpoint::load`] in file order
 /// (safetensors sorts them by name when writing).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Checkpoint {
     pub tensors: Vec<NamedTensor>,
     pub metadata: BTreeMap<String, String>,
+    /// How [`Checkpoint::save`] writes the tensors; what [`Checkpoint::load`] found (F16 if any
+    /// tensor was).
+    pub storage: Storage,
     /// The file this was loaded from, for error messages (`None` when built in memory).
     pub source: Option<PathBuf>,
 }
@@ -52,7 +68,7 @@ pub enum CheckpointError {
         #[source]
         source: SafeTensorError,
     },
-    #[error("tensor `{name}` in {} has dtype {dtype}, expected F32", path.display())]
+    #[error("tensor `{name}` in {} has dtype {dtype}, expected F32 or F16", path.display())]
     Dtype { path: PathBuf, name: String, dtype: String },
     #[error("tensor `{name}` for {} has shape {shape:?} ({expected} values) but {found} values", path.display())]
     DataLength { path: PathBuf, name: String, shape: Vec<usize>, expected: usize, found: usize },
@@ -64,23 +80,35 @@ pub enum CheckpointError {
     Shape { path: PathBuf, name: String, expected: Vec<usize>, found: Vec<usize> },
     #[error("tensor `{name}` in {} has non-finite value {value} at flat index {index}", path.display())]
     NonFinite { path: PathBuf, name: String, index: usize, value: f32 },
+    #[error("tensor `{name}` for {} has value {value} at flat index {index}, beyond F16's ±65504", path.display())]
+    HalfRange { path: PathBuf, name: String, index: usize, value: f32 },
 }
 
-/// Lets `safetensors::serialize` read a tensor as little-endian bytes without a second copy held.
-struct F32View<'a>(&'a NamedTensor);
+/// Lets `safetensors::serialize` read a tensor as little-endian bytes of its storage without a
+/// second copy held.
+struct StoredView<'a>(&'a NamedTensor, Storage);
 
-impl View for F32View<'_> {
+impl View for StoredView<'_> {
     fn dtype(&self) -> Dtype {
-        Dtype::F32
+        match self.1 {
+            Storage::F32 => Dtype::F32,
+            Storage::F16 => Dtype::F16,
+        }
     }
     fn shape(&self) -> &[usize] {
         &self.0.shape
     }
     fn data(&self) -> std::borrow::Cow<'_, [u8]> {
-        self.0.data.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>().into()
+        let values = self.0.data.iter();
+        match self.1 {
+            Storage::F32 => values.flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>().into(),
+            Storage::F16 => {
+                values.flat_map(|&x| half::f16::from_f32(x).to_le_bytes()).collect::<Vec<u8>>().into()
+            }
+        }
     }
     fn data_len(&self) -> usize {
-        self.0.data.len() * 4
+        self.0.data.len() * self.dtype().bitsize() / 8
     }
 }
 
@@ -115,12 +143,25 @@ impl Checkpoint {
             if !seen.insert(t.name.as_str()) {
                 return Err(CheckpointError::Duplicate { path: path.to_path_buf(), name: t.name.clone() });
             }
+            let beyond_half = |x: &f32| x.is_finite() && x.abs() > f32::from(half::f16::MAX);
+            if self.storage == Storage::F16
+                && let Some((index, &value)) = t.data.iter().enumerate().find(|(_, x)| beyond_half(x))
+            {
+                return Err(CheckpointError::HalfRange {
+                    path: path.to_path_buf(),
+                    name: t.name.clone(),
+                    index,
+                    value,
+                });
+            }
         }
         let metadata: Option<HashMap<String, String>> = (!self.metadata.is_empty())
             .then(|| self.metadata.iter().map(|(k, v)| (k.clone(), v.clone())).collect());
-        let bytes =
-            safetensors::serialize(self.tensors.iter().map(|t| (t.name.as_str(), F32View(t))), metadata)
-                .map_err(|source| CheckpointError::Encode { path: path.to_path_buf(), source })?;
+        let bytes = safetensors::serialize(
+            self.tensors.iter().map(|t| (t.name.as_str(), StoredView(t, self.storage))),
+            metadata,
+        )
+        .map_err(|source| CheckpointError::Encode { path: path.to_path_buf(), source })?;
         let bytes = canonical_header(bytes);
 
         let file_name = path.file_name().ok_or_else(|| {
@@ -156,7 +197,7 @@ impl Checkpoint {
         Ok(())
     }
 
-    /// Reads a safetensors file. F32 tensors only; any other dtype is an error naming the tensor.
+    /// Reads a safetensors file. F32 and F16 tensors; any other dtype is an error naming the tensor.
     pub fn load(path: &Path) -> Result<Self, CheckpointError> {
         let bytes = fs::read(path).map_err(|source| CheckpointError::Io {
             path: path.to_path_buf(),
@@ -167,25 +208,33 @@ impl Checkpoint {
         let (header_len, meta) = SafeTensors::read_metadata(&bytes).map_err(format)?;
         // read_metadata checked that the offsets tile the data section exactly.
         let data = &bytes[8 + header_len..];
-        let mut tensors = Vec::new();
+        let (mut tensors, mut storage) = (Vec::new(), Storage::F32);
         for name in meta.offset_keys() {
             let info =
                 meta.info(&name).ok_or_else(|| format(SafeTensorError::TensorNotFound(name.clone())))?;
-            if info.dtype != Dtype::F32 {
-                return Err(CheckpointError::Dtype {
-                    path: path.to_path_buf(),
-                    name,
-                    dtype: format!("{:?}", info.dtype),
-                });
-            }
             let (start, end) = info.data_offsets;
-            // chunks of 4 + from_le_bytes: the data section need not be 4-byte aligned.
-            let values =
-                data[start..end].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]));
-            tensors.push(NamedTensor { name, shape: info.shape.clone(), data: values.collect() });
+            // chunks + from_le_bytes: the data section need not be aligned.
+            let bytes = &data[start..end];
+            let values: Vec<f32> = match info.dtype {
+                Dtype::F32 => {
+                    bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+                }
+                Dtype::F16 => {
+                    storage = Storage::F16;
+                    bytes.chunks_exact(2).map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()).collect()
+                }
+                dtype => {
+                    return Err(CheckpointError::Dtype {
+                        path: path.to_path_buf(),
+                        name,
+                        dtype: format!("{dtype:?}"),
+                    });
+                }
+            };
+            tensors.push(NamedTensor { name, shape: info.shape.clone(), data: values });
         }
         let metadata = meta.metadata().iter().flatten().map(|(k, v)| (k.clone(), v.clone())).collect();
-        Ok(Self { tensors, metadata, source: Some(path.to_path_buf()) })
+        Ok(Self { tensors, metadata, storage, source: Some(path.to_path_buf()) })
     }
 
     /// The first tensor with this name.
@@ -329,6 +378,44 @@ mod tests {
         empty.save(&path).unwrap();
         let back = Checkpoint::load(&path).unwrap();
         assert!(back.tensors.is_empty() && back.metadata.is_empty());
+    }
+
+    /// F16 storage writes two bytes a value and reads back each value rounded to half precision;
+    /// a value beyond half's range is refused by name before anything is written.
+    #[test]
+    fn half_storage_rounds_each_value_and_refuses_overflow() {
+        let dir = tempfile::tempdir().unwrap();
+        let (full, small) = (dir.path().join("full.safetensors"), dir.path().join("half.safetensors"));
+        let mut ck = sample();
+        ck.tensors[0].data[3] = 60000.0; // f32::MAX has no half
+        ck.save(&full).unwrap();
+        let half_ck = Checkpoint { storage: Storage::F16, ..ck.clone() };
+        half_ck.save(&small).unwrap();
+        let data_bytes = |path: &Path| {
+            fs::metadata(path).unwrap().len()
+                - 8
+                - SafeTensors::read_metadata(&fs::read(path).unwrap()).unwrap().0 as u64
+        };
+        assert_eq!(2 * data_bytes(&small), data_bytes(&full), "two bytes a value");
+        let back = Checkpoint::load(&small).unwrap();
+        assert_eq!(back.storage, Storage::F16);
+        let rounded: Vec<NamedTensor> = sorted(ck.tensors.clone())
+            .into_iter()
+            .map(|t| NamedTensor {
+                data: t.data.iter().map(|&x| half::f16::from_f32(x).to_f32()).collect(),
+                ..t
+            })
+            .collect();
+        assert_eq!(bits(&back.tensors), bits(&rounded));
+        let third = back.tensor("z/kernel").unwrap().data[4];
+        assert!(third != 1.0 / 3.0 && (third - 1.0 / 3.0).abs() <= (1.0 / 3.0) / 2048.0, "{third}");
+        assert_eq!(Checkpoint::load(&full).unwrap().storage, Storage::F32);
+
+        let mut too_big = half_ck;
+        too_big.tensors[1].data[2] = 70000.0;
+        let err = too_big.save(&small).unwrap_err().to_string();
+        assert!(err.contains("`a/bias`") && err.contains("70000") && err.contains("F16"), "{err}");
+        assert_eq!(bits(&Checkpoint::load(&small).unwrap().tensors), bits(&rounded), "the file kept");
     }
 
     #[test]
