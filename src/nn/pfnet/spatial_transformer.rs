@@ -157,6 +157,7 @@ pub fn crop_local_map_stack(
     if pixels == 0 {
         return;
     }
+    let sample_row = row_sampler(map);
     for (k, image) in out.chunks_exact_mut(pixels).enumerate() {
         let (pose, spec) = (k / specs.len(), &specs[k % specs.len()]);
         let plan = SamplePlan::new(map, xs[pose], ys[pose], yaws[pose], spec);
@@ -168,14 +169,17 @@ pub fn crop_local_map_stack(
     }
 }
 
-/// Writes pixel c of `row` from centre coordinates start + c·step.
-fn sample_row(map: &MapView, start: [f32; 2], step: [f32; 2], row: &mut [f32]) {
+/// Writes pixel c of a row from centre coordinates start + c·step.
+type RowSampler = fn(&MapView, [f32; 2], [f32; 2], &mut [f32]);
+
+/// The row sampler for `map` on this CPU, chosen once per crop rather than once per row.
+fn row_sampler(map: &MapView) -> RowSampler {
     #[cfg(target_arch = "x86_64")]
     if is_x86_feature_detected!("avx512f") && fits_gather_indices(map) {
-        // SAFETY: the CPU has AVX-512F.
-        return unsafe { sample_row_avx512(map, start, step, row) };
+        // SAFETY: chosen only where the CPU has AVX-512F.
+        return |map, start, step, row| unsafe { sample_row_avx512(map, start, step, row) };
     }
-    sample_row_scalar(map, start, step, row);
+    sample_row_scalar
 }
 
 fn sample_row_scalar(map: &MapView, start: [f32; 2], step: [f32; 2], row: &mut [f32]) {
@@ -532,7 +536,7 @@ mod tests {
 
     #[test]
     fn rows_read_the_same_bits_on_every_path() {
-        // On an AVX-512 machine `sample_row` gathers 16 pixels at once; it must give the scalar
+        // On an AVX-512 machine `row_sampler`'s choice gathers 16 pixels at once; it must give the scalar
         // path's bits for rows inside the map, across its edge, far off it and at NaN.
         let mut rng = Pcg64::seed_from_u64(11);
         let mut map = TestMap::free(40, 30);
@@ -545,7 +549,7 @@ mod tests {
             };
             let step = [rng.random_range(-1.5..1.5), rng.random_range(-1.5..1.5)];
             let (mut fast, mut scalar) = (vec![0.0; len], vec![0.0; len]);
-            sample_row(&map.view(), start, step, &mut fast);
+            row_sampler(&map.view())(&map.view(), start, step, &mut fast);
             sample_row_scalar(&map.view(), start, step, &mut scalar);
             for (c, (f, s)) in fast.iter().zip(&scalar).enumerate() {
                 assert_eq!(f.to_bits(), s.to_bits(), "trial {trial} pixel {c}: {f} against {s}");
