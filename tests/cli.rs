@@ -79,6 +79,9 @@ fn eval_writes_the_issue_keys_and_is_deterministic() {
     assert!(md.contains("| random |") && md.contains("tracking · seen"), "paper-style table:\n{md}");
     let episodes = std::fs::read_to_string(dir.path().join("a/episodes.csv")).unwrap();
     assert_eq!(episodes.lines().count(), 1 + 4 * 4, "a header, then 4 cells × 4 episodes");
+    let steps = std::fs::read_to_string(dir.path().join("a/steps.csv")).unwrap();
+    assert_eq!(steps.lines().count(), 1 + 4 * 8, "a header, then 4 cells × 8 steps");
+    assert!(steps.lines().nth(1).unwrap().contains(",1,4,"), "step 1 of 4 episodes: {steps}");
 }
 
 #[test]

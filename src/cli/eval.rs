@@ -1,10 +1,10 @@
 //! `apfn eval --config FILE.ron [--out DIR]`: every cell of localizer × policy × task × split,
-//! cells in parallel, with a progress bar; writes results.json, results.csv, results.md and
-//! episodes.csv, and with `--figures N` a PNG of each cell's first N episodes under `figures/`.
+//! cells in parallel, with a progress bar; writes results.json, results.csv, results.md,
+//! episodes.csv, steps.csv (the error at each step) and paired.md, and with `--figures N` a PNG of each cell's first N episodes under `figures/`.
 
 use crate::cli::{count, set_threads};
 use crate::eval::{
-    CellOutcome, EpisodeRow, EvalConfig, ResultRow, cell_steps, cells, encode_png, episode_figure,
+    CellOutcome, EpisodeRow, EvalConfig, ResultRow, StepRow, cell_steps, cells, encode_png, episode_figure,
     figure_file_name, figure_title, run_cell, write_results,
 };
 use crate::world::map::write_atomically;
@@ -50,7 +50,8 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let rows: Vec<ResultRow> = outcomes.iter().map(|o| o.row.clone()).collect();
     let episodes: Vec<EpisodeRow> = outcomes.iter().flat_map(|o| o.episodes.iter().cloned()).collect();
-    write_results(&args.out, &rows, &episodes)?;
+    let steps: Vec<StepRow> = outcomes.iter().flat_map(|o| o.steps.iter().cloned()).collect();
+    write_results(&args.out, &rows, &episodes, &steps)?;
     let figures = write_figures(&args.out.join("figures"), &outcomes)?;
     let seconds = started.elapsed().as_secs_f64();
     let robot_steps: u64 = cells
@@ -61,7 +62,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         })
         .sum();
     println!(
-        "{}, {} ({:.0} robot-steps/s) in {:.1} s ({}); wrote {}/results.{{json,csv,md}} and episodes.csv",
+        "{}, {} ({:.0} robot-steps/s) in {:.1} s ({}); wrote {}/results.{{json,csv,md}}, episodes.csv and steps.csv",
         count(rows.len() as u64, "cell"),
         count(total, "agent step"),
         robot_steps as f64 / seconds,

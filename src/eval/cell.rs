@@ -5,6 +5,7 @@ use crate::compose::{ComposeError, Pipeline};
 use crate::episode::{CompletedEpisodes, EpisodeRecord, summarize};
 use crate::eval::config::LoadedEval;
 use crate::eval::episodes::EpisodeRow;
+use crate::eval::steps::StepRow;
 use crate::particles::{InitParams, ObservationModel, Task};
 use crate::plugin::{ApfnSet, headless_app};
 use crate::world::OccupancyMap;
@@ -100,11 +101,13 @@ pub fn schedule_labels(eval: &LoadedEval, index: usize) -> (String, String) {
     }
 }
 
-/// A finished cell: its table row, one summary per episode, the episodes' full records, and the
-/// maps they ran on (by entity, as `EpisodeRecord::map` names them) for figures.
+/// A finished cell: its table row, one summary per episode, the error at each step over its
+/// episodes, the episodes' full records, and the maps they ran on (by entity, as
+/// `EpisodeRecord::map` names them) for figures.
 pub struct CellOutcome {
     pub row: ResultRow,
     pub episodes: Vec<EpisodeRow>,
+    pub steps: Vec<StepRow>,
     pub records: Vec<EpisodeRecord>,
     pub maps: HashMap<Entity, OccupancyMap>,
 }
@@ -164,7 +167,8 @@ pub fn run_cell(eval: &LoadedEval, cell: &CellSpec, on_step: impl Fn()) -> Resul
     };
     let episodes =
         records.iter().enumerate().filter_map(|(k, r)| EpisodeRow::from_record(&row, k, r)).collect();
-    Ok(CellOutcome { row, episodes, records, maps })
+    let steps = StepRow::of_cell(&row, &records);
+    Ok(CellOutcome { row, episodes, steps, records, maps })
 }
 
 #[cfg(test)]

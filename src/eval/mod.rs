@@ -8,6 +8,7 @@ mod episodes;
 mod figure;
 mod font;
 mod paired;
+mod steps;
 mod table;
 
 pub use cell::{CellOutcome, CellSpec, ResultRow, cell_steps, cells, labels, run_cell, schedule_labels};
@@ -16,4 +17,5 @@ pub use episodes::EpisodeRow;
 pub use figure::{FigureError, encode_png, episode_figure, figure_file_name, figure_title};
 pub use font::register_sans_serif;
 pub use paired::{PairedRow, paired_markdown, paired_rows};
+pub use steps::StepRow;
 pub use table::{csv, markdown, write_results};

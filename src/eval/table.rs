@@ -1,22 +1,30 @@
 //! Writes evaluation results: results.json (rows), results.csv, results.md laid out like the
 //! paper's tables (rows = policies, column groups = tasks, one column per split), episodes.csv
-//! (every episode behind every row) and paired.md (each policy against its cell's best other).
+//! (every episode behind every row), steps.csv (each row's error at every step) and paired.md
+//! (each policy against its cell's best other).
 
 use crate::eval::cell::ResultRow;
 use crate::eval::episodes::EpisodeRow;
 use crate::eval::paired::{paired_markdown, paired_rows};
+use crate::eval::steps::StepRow;
 use crate::world::map::write_atomically;
 use anyhow::Context;
 use serde::Serialize;
 use std::path::Path;
 
-/// Writes the five result files atomically into `out`.
-pub fn write_results(out: &Path, rows: &[ResultRow], episodes: &[EpisodeRow]) -> anyhow::Result<()> {
+/// Writes the six result files atomically into `out`.
+pub fn write_results(
+    out: &Path,
+    rows: &[ResultRow],
+    episodes: &[EpisodeRow],
+    steps: &[StepRow],
+) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     write_atomically(&out.join("results.json"), serde_json::to_string_pretty(rows)?.as_bytes())?;
     write_atomically(&out.join("results.csv"), &csv(rows)?)?;
     write_atomically(&out.join("results.md"), markdown(rows).as_bytes())?;
     write_atomically(&out.join("episodes.csv"), &csv(episodes)?)?;
+    write_atomically(&out.join("steps.csv"), &csv(steps)?)?;
     write_atomically(&out.join("paired.md"), paired_markdown(&paired_rows(episodes)).as_bytes())?;
     Ok(())
 }
