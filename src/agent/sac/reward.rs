@@ -1,6 +1,7 @@
 //! The agent's reward (paper, eq. 6): minus the squared pose error of the filter's estimate after
 //! this step's update, r = −(Δx² + Δy² + 0.36 Δθ²) in m² and rad², and −0.1 when the robot
-//! touched anything while executing the action.
+//! touched anything while executing the action. Beyond the paper, `form: distance` pays the
+//! square root of that loss instead: metres, the scale of the tables' mean position error.
 
 use crate::act::Collided;
 use crate::episode::EpisodeStart;
@@ -21,11 +22,26 @@ pub struct RewardParams {
     /// paper's unbounded loss. Beyond the paper: a lost filter's loss is tens of m² per step, so
     /// a few such episodes dominate every critic batch; a cap keeps the critics' targets in range.
     pub max_loss: Option<f32>,
+    /// What the (capped) loss pays: itself (the paper) or its square root.
+    pub form: RewardForm,
+}
+
+/// How the pose loss L = Δx² + Δy² + w·Δθ² becomes a reward.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum RewardForm {
+    /// r = −L (paper, eq. 6): a step 3 m off costs 100 times one 0.3 m off, so the first steps
+    /// of a global localization, which no motion shortens much, outweigh the convergence after.
+    #[default]
+    Squared,
+    /// r = −√L, metres: each step weighs its error as the tables' mean position error does, and
+    /// a lost filter costs metres, not tens of m², so no cap is needed to keep targets in range.
+    Distance,
 }
 
 impl Default for RewardParams {
     fn default() -> Self {
-        Self { heading_weight: 0.36, collision_penalty: 0.1, max_loss: None }
+        Self { heading_weight: 0.36, collision_penalty: 0.1, max_loss: None, form: RewardForm::Squared }
     }
 }
 
@@ -48,7 +64,12 @@ pub fn reward(estimate: &PoseEstimate, truth: &TruePose, collided: bool, params:
     let (dx, dy, dyaw) = (e.x - t.x, e.y - t.y, angle_error(e.yaw, t.yaw));
     let penalty = if collided { params.collision_penalty } else { 0.0 };
     let loss = dx * dx + dy * dy + params.heading_weight * dyaw * dyaw;
-    -params.max_loss.map_or(loss, |cap| loss.min(cap)) - penalty
+    let capped = params.max_loss.map_or(loss, |cap| loss.min(cap));
+    let cost = match params.form {
+        RewardForm::Squared => capped,
+        RewardForm::Distance => capped.sqrt(),
+    };
+    -cost - penalty
 }
 
 /// Reads PoseEstimate, TruePose, Collided, EpisodeStart, RewardParams. Writes Reward.
@@ -93,6 +114,18 @@ mod tests {
         assert!((reward(&lost, &truth, true, &capped) + 2.1).abs() < 1e-6, "the bump comes on top");
         assert!((reward(&near, &truth, false, &capped) + 0.25).abs() < 1e-6, "below the cap: unchanged");
         assert!(RewardParams { max_loss: Some(0.0), ..Default::default() }.check().is_err());
+    }
+
+    #[test]
+    fn the_distance_form_pays_the_root_of_the_loss() {
+        let truth = TruePose(Pose2::new(0.0, 0.0, 0.0));
+        let estimate = PoseEstimate { pose: Pose2::new(3.0, 4.0, 1.0), ..Default::default() };
+        let distance = RewardParams { form: RewardForm::Distance, ..Default::default() };
+        let root = (25.0f32 + 0.36).sqrt();
+        assert!((reward(&estimate, &truth, false, &distance) + root).abs() < 1e-5);
+        assert!((reward(&estimate, &truth, true, &distance) + root + 0.1).abs() < 1e-5, "the bump stays");
+        let capped = RewardParams { max_loss: Some(4.0), ..distance };
+        assert!((reward(&estimate, &truth, false, &capped) + 2.0).abs() < 1e-6, "the cap applies first");
     }
 
     #[test]
