@@ -63,13 +63,14 @@ impl EpisodeRow {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::episode::{EpisodeLog, StepError};
     use crate::world::Pose2;
     use bevy::prelude::Entity;
 
-    fn record(errors: &[f32]) -> EpisodeRecord {
+    /// An episode with these position errors (heading error 0.1 rad at every step).
+    pub(in crate::eval) fn record(errors: &[f32]) -> EpisodeRecord {
         let n = errors.len();
         let log = EpisodeLog {
             errors: errors
@@ -84,7 +85,7 @@ mod tests {
         EpisodeRecord { robot: Entity::PLACEHOLDER, map: Entity::PLACEHOLDER, episode: 0, log }
     }
 
-    fn cell() -> ResultRow {
+    pub(in crate::eval) fn cell() -> ResultRow {
         ResultRow {
             localizer: "mcl".into(),
             policy: "turn".into(),

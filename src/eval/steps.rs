@@ -59,55 +59,20 @@ fn median(sorted: &[f32]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::episode::{EpisodeLog, StepError};
-    use bevy::prelude::Entity;
-
-    fn record(errors: &[(f32, f32)]) -> EpisodeRecord {
-        let log = EpisodeLog {
-            errors: errors
-                .iter()
-                .map(|&(pos_err_m, orient_err_rad)| StepError { pos_err_m, orient_err_rad, loss: 0.0 })
-                .collect(),
-            ..EpisodeLog::default()
-        };
-        EpisodeRecord { robot: Entity::PLACEHOLDER, map: Entity::PLACEHOLDER, episode: 0, log }
-    }
-
-    fn cell() -> ResultRow {
-        ResultRow {
-            localizer: "mcl".into(),
-            policy: "goalnav".into(),
-            task: Task::Global,
-            split: "seen".into(),
-            map: "apartments".into(),
-            particles: 3000,
-            episodes: 3,
-            seed: 0,
-            mean_pos_err_m: 0.0,
-            rmse_pos_m: 0.0,
-            final_pos_err_m: 0.0,
-            mean_orient_err_rad: 0.0,
-            final_orient_err_rad: 0.0,
-            success_rate: 0.0,
-        }
-    }
+    use crate::eval::episodes::tests::{cell, record};
 
     #[test]
     fn each_step_averages_the_episodes_that_reached_it() {
-        let records = [
-            record(&[(3.0, 0.3), (1.0, 0.1)]),
-            record(&[(1.0, 0.1), (0.5, 0.2)]),
-            record(&[(2.0, 0.2), (0.1, 0.3), (0.4, 0.5)]),
-        ];
+        let records = [record(&[3.0, 1.0]), record(&[1.0, 0.5]), record(&[2.0, 0.1, 0.4])];
         let rows = StepRow::of_cell(&cell(), &records);
         assert_eq!(rows.iter().map(|r| (r.step, r.episodes)).collect::<Vec<_>>(), [(1, 3), (2, 3), (3, 1)]);
         assert!((rows[0].mean_pos_err_m - 2.0).abs() < 1e-6);
         assert_eq!(rows[0].median_pos_err_m, 2.0);
         assert!((rows[1].mean_pos_err_m - 1.6 / 3.0).abs() < 1e-6);
         assert_eq!(rows[1].median_pos_err_m, 0.5);
-        assert!((rows[1].mean_orient_err_rad - 0.2).abs() < 1e-6);
+        assert!((rows[1].mean_orient_err_rad - 0.1).abs() < 1e-6);
         assert_eq!((rows[2].mean_pos_err_m, rows[2].median_pos_err_m), (0.4, 0.4));
-        assert_eq!((rows[0].policy.as_str(), rows[0].task), ("goalnav", Task::Global));
+        assert_eq!((rows[0].policy.as_str(), rows[0].task), ("turn", Task::Tracking));
     }
 
     #[test]
