@@ -82,6 +82,8 @@ fn eval_writes_the_issue_keys_and_is_deterministic() {
     let steps = std::fs::read_to_string(dir.path().join("a/steps.csv")).unwrap();
     assert_eq!(steps.lines().count(), 1 + 4 * 8, "a header, then 4 cells × 8 steps");
     assert!(steps.lines().nth(1).unwrap().contains(",1,4,"), "step 1 of 4 episodes: {steps}");
+    let curves = std::fs::read_dir(dir.path().join("a/curves")).unwrap().count();
+    assert_eq!(curves, 4, "an error-over-time figure per task and split");
 }
 
 #[test]

@@ -1,11 +1,12 @@
 //! `apfn eval --config FILE.ron [--out DIR]`: every cell of localizer × policy × task × split,
 //! cells in parallel, with a progress bar; writes results.json, results.csv, results.md,
-//! episodes.csv, steps.csv (the error at each step) and paired.md, and with `--figures N` a PNG of each cell's first N episodes under `figures/`.
+//! episodes.csv, steps.csv (the error at each step) with its figures under `curves/`, and
+//! paired.md, and with `--figures N` a PNG of each cell's first N episodes under `figures/`.
 
 use crate::cli::{count, set_threads};
 use crate::eval::{
-    CellOutcome, EpisodeRow, EvalConfig, ResultRow, StepRow, cell_steps, cells, encode_png, episode_figure,
-    figure_file_name, figure_title, run_cell, write_results,
+    CellOutcome, EpisodeRow, EvalConfig, ResultRow, StepRow, cell_steps, cells, curve_figures, encode_png,
+    episode_figure, figure_file_name, figure_title, run_cell, write_results,
 };
 use crate::world::map::write_atomically;
 use anyhow::Context;
@@ -52,6 +53,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let episodes: Vec<EpisodeRow> = outcomes.iter().flat_map(|o| o.episodes.iter().cloned()).collect();
     let steps: Vec<StepRow> = outcomes.iter().flat_map(|o| o.steps.iter().cloned()).collect();
     write_results(&args.out, &rows, &episodes, &steps)?;
+    write_curves(&args.out.join("curves"), &steps)?;
     let figures = write_figures(&args.out.join("figures"), &outcomes)?;
     let seconds = started.elapsed().as_secs_f64();
     let robot_steps: u64 = cells
@@ -62,7 +64,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         })
         .sum();
     println!(
-        "{}, {} ({:.0} robot-steps/s) in {:.1} s ({}); wrote {}/results.{{json,csv,md}}, episodes.csv and steps.csv",
+        "{}, {} ({:.0} robot-steps/s) in {:.1} s ({}); wrote {}/results.{{json,csv,md}}, episodes.csv, steps.csv and curves/",
         count(rows.len() as u64, "cell"),
         count(total, "agent step"),
         robot_steps as f64 / seconds,
@@ -78,6 +80,15 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         );
     }
     print!("{}", crate::eval::markdown(&rows));
+    Ok(())
+}
+
+/// Draws each (localizer, task, split) group's error over time into `dir`.
+fn write_curves(dir: &std::path::Path, steps: &[StepRow]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for (name, image) in curve_figures(steps)? {
+        write_atomically(&dir.join(&name), &encode_png(&image)?).with_context(|| name.clone())?;
+    }
     Ok(())
 }
 

@@ -42,7 +42,7 @@ pub enum FigureError {
     Encode(#[from] image::ImageError),
 }
 
-fn draw_err(e: impl std::error::Error) -> FigureError {
+pub(super) fn draw_err(e: impl std::error::Error) -> FigureError {
     FigureError::Draw(e.to_string())
 }
 

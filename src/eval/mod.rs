@@ -4,6 +4,7 @@
 
 mod cell;
 mod config;
+mod curves;
 mod episodes;
 mod figure;
 mod font;
@@ -13,6 +14,7 @@ mod table;
 
 pub use cell::{CellOutcome, CellSpec, ResultRow, cell_steps, cells, labels, run_cell, schedule_labels};
 pub use config::{EvalConfig, LoadedEval, MapGroup};
+pub use curves::curve_figures;
 pub use episodes::EpisodeRow;
 pub use figure::{FigureError, encode_png, episode_figure, figure_file_name, figure_title};
 pub use font::register_sans_serif;
