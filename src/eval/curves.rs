@@ -3,7 +3,7 @@
 //! episodes (`steps.csv`'s `mean_pos_err_m`), so that where one policy gains on another —
 //! the first steps, the convergence, the lost episodes at the end — reads at a glance.
 
-use crate::eval::figure::{FigureError, draw_err};
+use crate::eval::figure::{FigureError, draw_err, draw_legend, step_chart};
 use crate::eval::font::register_sans_serif;
 use crate::eval::steps::StepRow;
 use crate::particles::Task;
@@ -11,7 +11,6 @@ use image::{Rgb, RgbImage};
 use plotters::prelude::*;
 
 const SIZE: (u32, u32) = (1000, 650);
-const TEXT: (&str, u32) = ("sans-serif", 24);
 /// Line colours, one per policy in the order the config lists them (Okabe–Ito, then greys).
 const PALETTE: [RGBColor; 8] = [
     RGBColor(213, 94, 0),
@@ -67,25 +66,8 @@ fn curve_figure(rows: &[&StepRow], title: &str) -> Result<RgbImage, FigureError>
     {
         register_sans_serif();
         let root = BitMapBackend::with_buffer(&mut canvas, SIZE).into_drawing_area();
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 28))
-            .margin(20)
-            .x_label_area_size(55)
-            .y_label_area_size(90)
-            .build_cartesian_2d(1f32..last, 0f32..top)
-            .map_err(draw_err)?;
-        chart
-            .configure_mesh()
-            .x_desc("step")
-            .y_desc("mean position error (m)")
-            .x_label_formatter(&|x| format!("{x:.0}"))
-            .y_label_formatter(&|y| format!("{y:.*}", if top < 0.5 { 2 } else { 1 }))
-            .label_style(TEXT)
-            .axis_desc_style(TEXT)
-            .light_line_style(RGBColor(236, 236, 236))
-            .bold_line_style(RGBColor(215, 215, 215))
-            .draw()
-            .map_err(draw_err)?;
+        let area = root.titled(title, ("sans-serif", 28)).map_err(draw_err)?;
+        let mut chart = step_chart(&area, last, top, "mean position error (m)")?;
         for (k, policy) in policies.iter().enumerate() {
             let style = PALETTE[k % PALETTE.len()].stroke_width(3);
             let curve =
@@ -94,16 +76,9 @@ fn curve_figure(rows: &[&StepRow], title: &str) -> Result<RgbImage, FigureError>
                 .draw_series(LineSeries::new(curve, style))
                 .map_err(draw_err)?
                 .label(*policy)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
         }
-        chart
-            .configure_series_labels()
-            .label_font(TEXT)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(draw_err)?;
+        draw_legend(&mut chart)?;
         root.present().map_err(draw_err)?;
     }
     Ok(canvas)

@@ -11,6 +11,7 @@ use crate::world::map::render;
 use crate::world::{OccupancyMap, Pose2};
 use image::{ImageFormat, Rgb, RgbImage, imageops};
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf32;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::io::Cursor;
@@ -399,6 +400,32 @@ fn error_chart<DB: DrawingBackend>(
         .fold(threshold.unwrap_or(0.0) * 1.5, f32::max)
         .max(0.1)
         * 1.1;
+    let mut chart = step_chart(area, last, top, y_desc)?;
+    let curve = values.iter().enumerate().map(|(k, v)| (k as f32 + 1.0, *v));
+    let style = RGBColor(180, 30, 30).stroke_width(3);
+    chart
+        .draw_series(LineSeries::new(curve, style))
+        .map_err(draw_err)?
+        .label(y_desc.split(" (").next().unwrap_or(y_desc).trim_matches('|'))
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
+    if let Some(r) = threshold {
+        let dashed = BLACK.stroke_width(2);
+        chart
+            .draw_series(DashedLineSeries::new([(1.0, r), (last, r)], 10, 7, dashed))
+            .map_err(draw_err)?
+            .label(format!("success radius {r} m"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], dashed));
+    }
+    draw_legend(&mut chart)
+}
+
+/// A chart over steps 1…`last` and errors 0…`top`, its axes and grid drawn.
+pub(super) fn step_chart<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    last: f32,
+    top: f32,
+    y_desc: &str,
+) -> Result<StepChart<'a, DB>, FigureError> {
     let mut chart = ChartBuilder::on(area)
         .margin(15)
         .x_label_area_size(55)
@@ -419,21 +446,15 @@ fn error_chart<DB: DrawingBackend>(
         .bold_line_style(RGBColor(215, 215, 215))
         .draw()
         .map_err(draw_err)?;
-    let curve = values.iter().enumerate().map(|(k, v)| (k as f32 + 1.0, *v));
-    let style = RGBColor(180, 30, 30).stroke_width(3);
-    chart
-        .draw_series(LineSeries::new(curve, style))
-        .map_err(draw_err)?
-        .label(y_desc.split(" (").next().unwrap_or(y_desc).trim_matches('|'))
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
-    if let Some(r) = threshold {
-        let dashed = BLACK.stroke_width(2);
-        chart
-            .draw_series(DashedLineSeries::new([(1.0, r), (last, r)], 10, 7, dashed))
-            .map_err(draw_err)?
-            .label(format!("success radius {r} m"))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], dashed));
-    }
+    Ok(chart)
+}
+
+pub(super) type StepChart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf32, RangedCoordf32>>;
+
+/// The labelled series' legend, top right.
+pub(super) fn draw_legend<'a, DB: DrawingBackend + 'a>(
+    chart: &mut StepChart<'a, DB>,
+) -> Result<(), FigureError> {
     chart
         .configure_series_labels()
         .label_font(TEXT)
