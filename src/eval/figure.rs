@@ -449,6 +449,7 @@ pub(super) fn step_chart<'a, DB: DrawingBackend>(
     Ok(chart)
 }
 
+/// What [`step_chart`] returns: plotters' chart on f32 steps × f32 errors.
 pub(super) type StepChart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf32, RangedCoordf32>>;
 
 /// The labelled series' legend, top right.
