@@ -44,7 +44,14 @@ fn bench(c: &mut Criterion) {
                     let centres = belief_modes(set, &weights, &estimate, params.modes, params.mode_bin_m);
                     let per_crop = out.len() / modes;
                     for (centre, crop) in centres.iter().zip(out.chunks_mut(per_crop)) {
-                        project_crop(set, &weights, &network, centre, &params, crop);
+                        project_crop(
+                            set,
+                            &weights,
+                            &network,
+                            centre,
+                            (params.cells, params.resolution_m),
+                            crop,
+                        );
                     }
                 })
             });

@@ -21,6 +21,7 @@ fn config(dir: &Path) -> (TrainSacConfig, PathBuf) {
         depth_columns: 0,
         belief_modes: 1,
         belief_history: 0,
+        belief_overview: false,
         agent: apfn::agent::sac::SacAgentConfig {
             buffer: 64,
             batch: 8,
@@ -169,6 +170,44 @@ fn an_agent_with_history_starts_from_a_policy_without_it() {
         present.iter().any(|&v| v > 0.0) && present != &last[..crop]
     });
     assert!(moved.count() > 0, "past crops differ from the present once an episode is under way");
+}
+
+/// `belief_overview` adds the coarse crop of the whole belief after the estimate's; a policy
+/// trained without it is a valid start, and the schedule must agree.
+#[test]
+fn an_agent_with_the_overview_starts_from_a_policy_without_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut config, _) = config(dir.path());
+    let (first, _) = train_and_sample(dir.path(), config.clone(), "train_first.ron");
+    first.agent().learner.nets.save(&dir.path().join("policy.safetensors")).unwrap();
+    let crop = "(\"belief_crop\",          ()),";
+    edit_schedule(
+        dir.path(),
+        &mut config,
+        crop,
+        "(\"belief_crop\", (overview_m: Some(0.4))),",
+        "apfn_overview.ron",
+    );
+    config.init = Some("policy.safetensors".into());
+
+    let err = SacTrainer::new(config.clone(), &dir.path().join("train_mismatched.ron")).err().unwrap();
+    let err = format!("{err:#}");
+    assert!(err.contains("belief_overview: expected true") && err.contains("`overview_m`"), "{err}");
+
+    config.belief_overview = true;
+    let (trainer, batch) = train_and_sample(dir.path(), config, "train_overview.ron");
+    assert_eq!(
+        trainer.agent().learner.nets.config.belief_channels,
+        8,
+        "the estimate's crop and the overview"
+    );
+    let crop = 4 * 50 * 50;
+    let wider = batch.transitions().obs.belief.chunks_exact(2 * crop).filter(|pair| {
+        let (fine, overview) = pair.split_at(crop);
+        let occupied = |c: &[f32]| c[..crop / 4].iter().filter(|&&free| free < 1.0).count();
+        occupied(overview) > occupied(fine)
+    });
+    assert!(wider.count() > 0, "the 20 m overview holds more of the map's walls than the 5 m crop");
 }
 
 #[test]

@@ -11,6 +11,11 @@
 //! With `history: h` the crops of the last h steps follow the present ones (frame stacking, as
 //! DQN stacks Atari frames): the belief is the filter's memory of what the robot saw, but the
 //! crop shows only 5 m of it, and a stack shows how that part has moved and sharpened.
+//!
+//! With `overview_m: Some(r)` one more crop of the same `cells`, at cell side r, follows the
+//! modes' crops, centred on and turned to the estimate like the first: at 0.4 m it shows 20 m, the
+//! whole of a paper-size apartment (at most 10 m a side) wherever the estimate lies in it, so an
+//! agent whose belief is still spread sees all of it and the rooms around it.
 
 use crate::belief::modes::belief_modes;
 use crate::episode::EpisodeStart;
@@ -41,11 +46,27 @@ pub struct BeliefParams {
     /// Past agent steps whose crops follow the present ones, most recent first (paper: 0). At an
     /// episode's first step the past is the present repeated, so no episode shows the last one's.
     pub history: usize,
+    /// Cell side of the coarse crop that shows the whole belief, metres (paper: none; ours 0.4
+    /// where used). Its free-space channel is the mean of the map over each cell, so a thin
+    /// wall still shows at a cell four times its width.
+    pub overview_m: Option<f32>,
 }
 
 impl Default for BeliefParams {
     fn default() -> Self {
-        Self { cells: 50, resolution_m: 0.1, modes: 1, mode_bin_m: 1.0, history: 0 }
+        Self { cells: 50, resolution_m: 0.1, modes: 1, mode_bin_m: 1.0, history: 0, overview_m: None }
+    }
+}
+
+impl BeliefParams {
+    /// Crops per agent step: the modes', then the overview if there is one.
+    pub fn crops_per_step(&self) -> usize {
+        self.modes + usize::from(self.overview_m.is_some())
+    }
+
+    /// Input channels of a network that reads these crops: 4 per crop, present and past steps.
+    pub fn channels(&self) -> usize {
+        BELIEF_CHANNELS * self.crops_per_step() * (1 + self.history)
     }
 }
 
@@ -55,6 +76,9 @@ impl StepParams for BeliefParams {
         expect_param(self.resolution_m > 0.0, "resolution_m", "a cell side > 0 m")?;
         expect_param(self.modes > 0, "modes", "at least 1 crop (the estimate)")?;
         expect_param(self.mode_bin_m > 0.0, "mode_bin_m", "a bin side > 0 m")?;
+        if let Some(side) = self.overview_m {
+            expect_param(side >= self.resolution_m, "overview_m", "a cell side ≥ resolution_m")?;
+        }
         crate::limits::BELIEF_HISTORY.check("history", self.history)
     }
 }
@@ -81,33 +105,43 @@ impl BeliefCrop {
     }
 }
 
-/// Fills one crop (4 channels of `cells²` in `out`) centred on `centre`: the kernel of
-/// [`belief_crop`]. `weights` are the set's normalised weights (`set.weights()`, computed once
-/// for all of a robot's crops).
+/// Fills one crop (4 channels of `cells²` in `out`) centred on `centre`, cells of `resolution_m`:
+/// the kernel of [`belief_crop`]. `weights` are the set's normalised weights (`set.weights()`,
+/// computed once for all of a robot's crops).
 pub fn project_crop(
     set: &ParticleSet,
     weights: &[f32],
     map: &NetworkMap,
     centre: &Pose2,
-    params: &BeliefParams,
+    (cells, resolution_m): (usize, f32),
     out: &mut [f32],
 ) {
-    let (n, res) = (params.cells, params.resolution_m);
+    let (n, res) = (cells, resolution_m);
     let (area, half) = (n * n, n as f32 / 2.0);
     out.fill(0.0);
     let (free, rest) = out.split_at_mut(area);
     let (weight, rest) = rest.split_at_mut(area);
     let (cos, sin) = rest.split_at_mut(area);
-    // Crop cell centres → the network map's grid: one affine map, set up once per crop.
+    // Crop cell centres → the network map's grid: one affine map, set up once per crop. A cell
+    // wider than the map's averages s × s points of it, so no wall falls between samples.
     let frame = map.origin.between(centre);
     let (fs, fc) = frame.yaw.sin_cos();
     let to_grid = 1.0 / map.resolution_m;
+    let s = (res / map.resolution_m - 1e-3).ceil().max(1.0) as usize;
+    let offsets: Vec<f32> = (0..s).map(|i| (i as f32 + 0.5) / s as f32 - 0.5).collect();
     for (row, cells) in free.chunks_mut(n).enumerate() {
-        let ahead = (half - row as f32 - 0.5) * res;
-        let (ax, ay) = (frame.x + fc * ahead, frame.y + fs * ahead);
         for (col, cell) in cells.iter_mut().enumerate() {
-            let left = (half - col as f32 - 0.5) * res;
-            *cell = 1.0 - map.occupancy_at_grid((ax - fs * left) * to_grid, (ay + fc * left) * to_grid);
+            let mut occupancy = 0.0;
+            for &da in &offsets {
+                let ahead = (half - row as f32 - 0.5 - da) * res;
+                let (ax, ay) = (frame.x + fc * ahead, frame.y + fs * ahead);
+                for &dl in &offsets {
+                    let left = (half - col as f32 - 0.5 - dl) * res;
+                    occupancy +=
+                        map.occupancy_at_grid((ax - fs * left) * to_grid, (ay + fc * left) * to_grid);
+                }
+            }
+            *cell = 1.0 - occupancy / (s * s) as f32;
         }
     }
     let (s0, c0) = centre.yaw.sin_cos();
@@ -138,22 +172,25 @@ pub fn belief_crop(
         };
         let weights = set.weights();
         let centres = belief_modes(set, &weights, &estimate.pose, params.modes, params.mode_bin_m);
+        let fine = (params.cells, params.resolution_m);
+        let coarse = params.overview_m.map(|side| (estimate.pose, (params.cells, side)));
+        let crops: Vec<_> = centres.iter().map(|&centre| (centre, fine)).chain(coarse).collect();
         let per_crop = BELIEF_CHANNELS * params.cells * params.cells;
-        let present = per_crop * centres.len();
+        let present = per_crop * crops.len();
         let len = present * (1 + params.history);
         let fresh = starts || crop.values.len() != len;
         crop.values.resize(len, 0.0);
         // Each past step moves one place back; the oldest drops off the end.
         crop.values.copy_within(..len - present, present);
-        for (centre, out) in centres.iter().zip(crop.values[..present].chunks_mut(per_crop)) {
-            project_crop(set, &weights, map, centre, &params, out);
+        for ((centre, geometry), out) in crops.iter().zip(crop.values[..present].chunks_mut(per_crop)) {
+            project_crop(set, &weights, map, centre, *geometry, out);
         }
         if fresh {
             let (now, past) = crop.values.split_at_mut(present);
             past.chunks_exact_mut(present).for_each(|step| step.copy_from_slice(now));
         }
         crop.cells = params.cells;
-        crop.centres = centres;
+        crop.centres = crops.iter().map(|(centre, _)| *centre).collect();
     });
 }
 
@@ -171,7 +208,7 @@ mod tests {
         let mut set = ParticleSet::from_poses(poses);
         set.log_w = weights.iter().map(|w| w.ln()).collect();
         let mut out = vec![f32::NAN; BELIEF_CHANNELS * params.cells * params.cells];
-        project_crop(&set, &set.weights(), &room(), &centre, params, &mut out);
+        project_crop(&set, &set.weights(), &room(), &centre, (params.cells, params.resolution_m), &mut out);
         out
     }
 
@@ -230,6 +267,31 @@ mod tests {
         assert!(crop.centres[1].distance(&poses[1]) < 1e-5, "crop 1 on the heavier mode: {:?}", crop.centres);
         let heavy = crop.channel(1, 1);
         assert!((heavy[8 * 16 + 8] - 0.7).abs() < 1e-6, "its particle at the centre");
+    }
+
+    #[test]
+    fn the_overview_shows_the_belief_beyond_the_fine_crop_and_walls_thinner_than_its_cells() {
+        let mut world = World::new();
+        world.insert_resource(BeliefParams { cells: 10, overview_m: Some(0.4), ..Default::default() });
+        let map = world.spawn(room()).id();
+        // 1 m fine crop (±0.5 m) and 4 m overview around (1.0, 0.75) facing +x; a particle 0.8 m ahead.
+        let poses = [Pose2::new(1.0, 0.75, 0.0), Pose2::new(1.8, 0.75, 0.0)];
+        let mut set = ParticleSet::from_poses(&poses);
+        set.log_w = vec![0.6f32.ln(), 0.4f32.ln()];
+        let estimate = PoseEstimate { pose: poses[0], cov: Default::default() };
+        let robot = world.spawn((set, estimate, OnMap(map), BeliefCrop::default())).id();
+        world.run_system_once(belief_crop).expect("belief_crop runs");
+        let crop = world.get::<BeliefCrop>(robot).expect("crop");
+        assert_eq!(crop.values.len(), 2 * BELIEF_CHANNELS * 100, "the estimate's crop, then the overview");
+        assert_eq!(crop.centres, vec![poses[0], poses[0]], "both on the estimate");
+        let total = |mode| crop.channel(mode, 1).iter().sum::<f32>();
+        assert!((total(0) - 0.6).abs() < 1e-6, "the fine crop holds the near particle only");
+        assert!((total(1) - 1.0).abs() < 1e-6, "the overview holds both");
+        assert!((crop.channel(1, 1)[3 * 10 + 5] - 0.4).abs() < 1e-6, "0.8 m ahead → 2 rows up, row 3");
+        let partial = |mode| crop.channel(mode, 0).iter().filter(|&&f| f > 0.0 && f < 1.0).count();
+        assert_eq!(partial(0), 0, "at the map's own resolution a cell is wall or free");
+        assert!(partial(1) > 0, "a 0.4 m cell shows the 0.1 m walls it holds as partly occupied");
+        assert!(crop.channel(1, 0).iter().all(|f| (0.0..=1.0).contains(f)));
     }
 
     #[test]

@@ -10,7 +10,7 @@
 //! to continue exactly as the uninterrupted one.
 
 use crate::agent::sac::{SacAgent, SacAgentConfig};
-use crate::belief::{BELIEF_CHANNELS, BeliefParams};
+use crate::belief::BeliefParams;
 use crate::compose::{LoadedScene, Pipeline, Scene, standard_registry};
 use crate::episode::Episode;
 use crate::nn::checkpoint::Checkpoint;
@@ -47,13 +47,17 @@ pub struct TrainSacConfig {
     /// schedule's `belief_crop` must then have as much `history`.
     #[serde(default)]
     pub belief_history: usize,
+    /// Whether the agent reads the coarse crop of the whole belief after the modes' (no, as the
+    /// paper); the schedule's `belief_crop` must then have an `overview_m`.
+    #[serde(default)]
+    pub belief_overview: bool,
     #[serde(default)]
     pub agent: SacAgentConfig,
     /// A policy file (`policy.safetensors` of an earlier run) whose encoders, actor and critics
     /// the run starts from instead of fresh ones: fine-tuning, e.g. on another task. The target
     /// critics start as copies of the critics and α at `agent.hyper.initial_alpha`; the network
     /// must be the one `network`, `depth_columns` and `belief_modes` describe, or have fewer
-    /// belief channels (a policy trained without `belief_history`, whose new channels then start
+    /// belief channels (a policy trained without `belief_history` or `belief_overview`, whose new channels then start
     /// at zero weight). Relative to the config file.
     #[serde(default)]
     pub init: Option<PathBuf>,
@@ -83,8 +87,13 @@ impl TrainSacConfig {
         }
         crate::limits::BELIEF_MODES.check("belief_modes", self.belief_modes)?;
         crate::limits::BELIEF_HISTORY.check("belief_history", self.belief_history)?;
-        let belief_channels = BELIEF_CHANNELS * self.belief_modes * (1 + self.belief_history);
-        Ok(SacNetConfig { depth_columns: self.depth_columns, belief_channels, ..named })
+        let crops = BeliefParams {
+            modes: self.belief_modes,
+            history: self.belief_history,
+            overview_m: self.belief_overview.then_some(1.0),
+            ..Default::default()
+        };
+        Ok(SacNetConfig { depth_columns: self.depth_columns, belief_channels: crops.channels(), ..named })
     }
 
     pub fn check(&self) -> Result<(), String> {
@@ -156,12 +165,16 @@ impl SacTrainer {
         let (mut app, robots) = headless_app(&loaded, pipeline)?;
         let net = config.net_config().map_err(anyhow::Error::msg)?;
         // The schedule's crops must be the network's input; a mismatch would only warn per step.
-        let crops = app.world().get_resource::<BeliefParams>().map_or((1, 0), |b| (b.modes, b.history));
+        let crops = app.world().get_resource::<BeliefParams>().cloned().unwrap_or_default();
         for (field, scheduled, configured) in [
-            ("belief_modes", crops.0, config.belief_modes),
-            ("belief_history", crops.1, config.belief_history),
+            ("belief_modes", crops.modes.to_string(), config.belief_modes.to_string()),
+            ("belief_history", crops.history.to_string(), config.belief_history.to_string()),
+            ("belief_overview", crops.overview_m.is_some().to_string(), config.belief_overview.to_string()),
         ] {
-            let step_field = field.trim_start_matches("belief_");
+            let step_field = match field {
+                "belief_overview" => "overview_m",
+                other => other.trim_start_matches("belief_"),
+            };
             anyhow::ensure!(
                 scheduled == configured,
                 "{}: {field}: expected {scheduled}, the `{step_field}` of belief_crop in {}, got {configured}",

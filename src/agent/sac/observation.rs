@@ -57,8 +57,8 @@ fn to_byte(unit: f32) -> u8 {
 pub fn encode_belief(crop: &BeliefCrop, shape: &ObservationShape, out: &mut [u8]) -> Result<(), String> {
     if crop.cells != shape.belief_cells || crop.values.len() != shape.belief_len() {
         return Err(format!(
-            "belief crop: expected {} crop(s) of {} cells (the network's input: modes × (1 + history)), \
-             got {} values of {} cells; set belief_crop's `cells`, `modes` and `history` to match",
+            "belief crop: expected {} crop(s) of {} cells (the network's input: (modes + overview) × (1 + history)), \
+             got {} values of {} cells; set belief_crop's `cells`, `modes`, `overview_m` and `history` to match",
             shape.belief_channels / BELIEF_CHANNELS,
             shape.belief_cells,
             crop.values.len(),

@@ -71,16 +71,18 @@ pub fn check_policy_inputs(world: &World) -> Result<(), String> {
     };
     let net = shared_policy(&path)?.config.clone();
     let crop = world.get_resource::<BeliefParams>().cloned().unwrap_or_default();
-    let channels = BELIEF_CHANNELS * crop.modes * (1 + crop.history);
+    let channels = crop.channels();
     if (channels, crop.cells) != (net.belief_channels, net.belief_cells) {
         return Err(format!(
-            "{path} reads {} belief crop(s) of {} cells (modes × (1 + history)); belief_crop gives {} \
-             of {} (modes: {}, history: {}): set its `modes`, `history` and `cells` to match",
+            "{path} reads {} belief crop(s) of {} cells ((modes + overview) × (1 + history)); belief_crop \
+             gives {} of {} (modes: {}, overview_m: {:?}, history: {}): set its `modes`, `overview_m`, \
+             `history` and `cells` to match",
             net.belief_channels / BELIEF_CHANNELS,
             net.belief_cells,
             channels / BELIEF_CHANNELS,
             crop.cells,
             crop.modes,
+            crop.overview_m,
             crop.history
         ));
     }
@@ -402,6 +404,8 @@ mod tests {
         world.insert_resource(BeliefParams { cells: 5, ..Default::default() });
         let err = check_policy_inputs(&world).unwrap_err();
         assert!(err.contains("reads 2 belief crop(s) of 5 cells") && err.contains("history: 0"), "{err}");
+        world.insert_resource(BeliefParams { cells: 5, overview_m: Some(0.4), ..Default::default() });
+        assert_eq!(check_policy_inputs(&world), Ok(()), "the overview is the second crop");
         world.insert_resource(BeliefParams { cells: 5, history: 1, ..Default::default() });
         world.insert_resource(LocalGridParams::default());
         let err = check_policy_inputs(&world).unwrap_err();
