@@ -142,17 +142,25 @@ fn a_multi_crop_agent_trains_on_the_crops_belief_crop_writes() {
     assert_eq!(batch.transitions().obs.belief.len(), 2 * 12 * 50 * 50);
 }
 
+/// A config that starts from a policy trained here on one crop (`policy.safetensors`) and
+/// schedules `belief_crop` with `crop_params` (in `dir/schedule`); its own belief fields still
+/// describe one crop.
+fn from_a_one_crop_policy(dir: &Path, crop_params: &str, schedule: &str) -> TrainSacConfig {
+    let (mut config, _) = config(dir);
+    let (first, _) = train_and_sample(dir, config.clone(), "train_first.ron");
+    first.agent().learner.nets.save(&dir.join("policy.safetensors")).unwrap();
+    let crop = "(\"belief_crop\",          ()),";
+    edit_schedule(dir, &mut config, crop, &format!("(\"belief_crop\", {crop_params}),"), schedule);
+    config.init = Some("policy.safetensors".into());
+    config
+}
+
 /// `belief_history` stacks past crops after the present one; a policy trained without them is a
 /// valid start (its networks widened with zero weights), and the schedule must agree.
 #[test]
 fn an_agent_with_history_starts_from_a_policy_without_it() {
     let dir = tempfile::tempdir().unwrap();
-    let (mut config, _) = config(dir.path());
-    let (first, _) = train_and_sample(dir.path(), config.clone(), "train_first.ron");
-    first.agent().learner.nets.save(&dir.path().join("policy.safetensors")).unwrap();
-    let crop = "(\"belief_crop\",          ()),";
-    edit_schedule(dir.path(), &mut config, crop, "(\"belief_crop\", (history: 2)),", "apfn_history.ron");
-    config.init = Some("policy.safetensors".into());
+    let mut config = from_a_one_crop_policy(dir.path(), "(history: 2)", "apfn_history.ron");
 
     let err = SacTrainer::new(config.clone(), &dir.path().join("train_mismatched.ron")).err().unwrap();
     let err = format!("{err:#}");
@@ -177,18 +185,7 @@ fn an_agent_with_history_starts_from_a_policy_without_it() {
 #[test]
 fn an_agent_with_the_overview_starts_from_a_policy_without_it() {
     let dir = tempfile::tempdir().unwrap();
-    let (mut config, _) = config(dir.path());
-    let (first, _) = train_and_sample(dir.path(), config.clone(), "train_first.ron");
-    first.agent().learner.nets.save(&dir.path().join("policy.safetensors")).unwrap();
-    let crop = "(\"belief_crop\",          ()),";
-    edit_schedule(
-        dir.path(),
-        &mut config,
-        crop,
-        "(\"belief_crop\", (overview_m: Some(0.4))),",
-        "apfn_overview.ron",
-    );
-    config.init = Some("policy.safetensors".into());
+    let mut config = from_a_one_crop_policy(dir.path(), "(overview_m: Some(0.4))", "apfn_overview.ron");
 
     let err = SacTrainer::new(config.clone(), &dir.path().join("train_mismatched.ron")).err().unwrap();
     let err = format!("{err:#}");
