@@ -57,8 +57,8 @@ pub struct TrainSacConfig {
     /// the run starts from instead of fresh ones: fine-tuning, e.g. on another task. The target
     /// critics start as copies of the critics and α at `agent.hyper.initial_alpha`; the network
     /// must be the one `network`, `depth_columns` and `belief_modes` describe, or have fewer
-    /// belief channels (a policy trained without `belief_history` or `belief_overview`, whose new channels then start
-    /// at zero weight). Relative to the config file.
+    /// belief channels (a policy trained without `belief_history` or `belief_overview`, whose new
+    /// channels then start at zero weight). Relative to the config file.
     #[serde(default)]
     pub init: Option<PathBuf>,
     /// World steps to train for (each moves every robot once).
@@ -87,10 +87,11 @@ impl TrainSacConfig {
         }
         crate::limits::BELIEF_MODES.check("belief_modes", self.belief_modes)?;
         crate::limits::BELIEF_HISTORY.check("belief_history", self.belief_history)?;
+        // The overview's cell side is the schedule's; only whether there is one counts here.
         let crops = BeliefParams {
             modes: self.belief_modes,
             history: self.belief_history,
-            overview_m: self.belief_overview.then_some(1.0),
+            overview_m: self.belief_overview.then_some(0.4),
             ..Default::default()
         };
         Ok(SacNetConfig { depth_columns: self.depth_columns, belief_channels: crops.channels(), ..named })
@@ -166,15 +167,16 @@ impl SacTrainer {
         let net = config.net_config().map_err(anyhow::Error::msg)?;
         // The schedule's crops must be the network's input; a mismatch would only warn per step.
         let crops = app.world().get_resource::<BeliefParams>().cloned().unwrap_or_default();
-        for (field, scheduled, configured) in [
-            ("belief_modes", crops.modes.to_string(), config.belief_modes.to_string()),
-            ("belief_history", crops.history.to_string(), config.belief_history.to_string()),
-            ("belief_overview", crops.overview_m.is_some().to_string(), config.belief_overview.to_string()),
+        for (field, step_field, scheduled, configured) in [
+            ("belief_modes", "modes", crops.modes.to_string(), config.belief_modes.to_string()),
+            ("belief_history", "history", crops.history.to_string(), config.belief_history.to_string()),
+            (
+                "belief_overview",
+                "overview_m",
+                crops.overview_m.is_some().to_string(),
+                config.belief_overview.to_string(),
+            ),
         ] {
-            let step_field = match field {
-                "belief_overview" => "overview_m",
-                other => other.trim_start_matches("belief_"),
-            };
             anyhow::ensure!(
                 scheduled == configured,
                 "{}: {field}: expected {scheduled}, the `{step_field}` of belief_crop in {}, got {configured}",
