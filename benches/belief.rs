@@ -1,6 +1,7 @@
 //! Belief projection (`belief::project_crop` via the crop centres of `belief::belief_modes`): the
 //! agent's 4 × 50 × 50 crop for a tracking-sized (300) and a global-sized (3,000) particle set on
-//! apartment 0, one crop (the paper's) and three (estimate + 2 modes). Throughput counts particles.
+//! apartment 0, one crop (the paper's), three (estimate + 2 modes) and one with the 20 m overview
+//! (`overview_m: 0.4`, 4 × 4 map samples per cell). Throughput counts particles.
 
 use apfn::belief::{BELIEF_CHANNELS, BeliefParams, belief_modes, project_crop};
 use apfn::particles::{ParticleSet, estimate_pose};
@@ -35,23 +36,20 @@ fn bench(c: &mut Criterion) {
         let set = spread_set(n, width_m, height_m);
         let estimate = estimate_pose(&set).expect("non-empty").pose;
         group.throughput(Throughput::Elements(n as u64));
-        for modes in [1, 3] {
-            let params = BeliefParams { modes, ..Default::default() };
-            let mut out = vec![0.0; modes * BELIEF_CHANNELS * params.cells * params.cells];
-            group.bench_with_input(BenchmarkId::new(format!("modes_{modes}"), n), &set, |b, set| {
+        for (label, modes, overview_m) in
+            [("modes_1", 1, None), ("modes_3", 3, None), ("overview", 1, Some(0.4))]
+        {
+            let params = BeliefParams { modes, overview_m, ..Default::default() };
+            let per_crop = BELIEF_CHANNELS * params.cells * params.cells;
+            let mut out = vec![0.0; params.crops_per_step() * per_crop];
+            group.bench_with_input(BenchmarkId::new(label, n), &set, |b, set| {
                 b.iter(|| {
                     let weights = set.weights();
                     let centres = belief_modes(set, &weights, &estimate, params.modes, params.mode_bin_m);
-                    let per_crop = out.len() / modes;
-                    for (centre, crop) in centres.iter().zip(out.chunks_mut(per_crop)) {
-                        project_crop(
-                            set,
-                            &weights,
-                            &network,
-                            centre,
-                            (params.cells, params.resolution_m),
-                            crop,
-                        );
+                    let fine = centres.iter().map(|&centre| (centre, (params.cells, params.resolution_m)));
+                    let coarse = params.overview_m.map(|side| (estimate, (params.cells, side)));
+                    for ((centre, geometry), crop) in fine.chain(coarse).zip(out.chunks_mut(per_crop)) {
+                        project_crop(set, &weights, &network, &centre, geometry, crop);
                     }
                 })
             });
