@@ -6,7 +6,7 @@
 use crate::eval::figure::{FigureError, draw_err, draw_legend, step_chart};
 use crate::eval::font::register_sans_serif;
 use crate::eval::steps::StepRow;
-use crate::particles::Task;
+use crate::eval::table::first_seen;
 use image::{Rgb, RgbImage};
 use plotters::prelude::*;
 
@@ -26,14 +26,7 @@ const PALETTE: [RGBColor; 8] = [
 /// The figures of `steps`: one per (localizer, task, split) in the order the rows first name
 /// them, with its file name.
 pub fn curve_figures(steps: &[StepRow]) -> Result<Vec<(String, RgbImage)>, FigureError> {
-    let mut groups: Vec<(&str, Task, &str)> = Vec::new();
-    for row in steps {
-        let group = (row.localizer.as_str(), row.task, row.split.as_str());
-        if !groups.contains(&group) {
-            groups.push(group);
-        }
-    }
-    groups
+    first_seen(steps.iter().map(|row| (row.localizer.as_str(), row.task, row.split.as_str())))
         .into_iter()
         .map(|(localizer, task, split)| {
             let rows: Vec<&StepRow> = steps
@@ -54,12 +47,7 @@ fn file_safe(label: &str) -> String {
 
 /// One line per policy of `rows` (all of one cell group), in the order they first appear.
 fn curve_figure(rows: &[&StepRow], title: &str) -> Result<RgbImage, FigureError> {
-    let mut policies: Vec<&str> = Vec::new();
-    for row in rows {
-        if !policies.contains(&row.policy.as_str()) {
-            policies.push(&row.policy);
-        }
-    }
+    let policies = first_seen(rows.iter().map(|row| row.policy.as_str()));
     let last = rows.iter().map(|r| r.step).max().unwrap_or(1).max(2) as f32;
     let top = rows.iter().map(|r| r.mean_pos_err_m).filter(|v| v.is_finite()).fold(0.1f32, f32::max) * 1.1;
     let mut canvas = RgbImage::from_pixel(SIZE.0, SIZE.1, Rgb([255, 255, 255]));

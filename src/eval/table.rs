@@ -38,19 +38,22 @@ pub fn csv<T: Serialize>(records: &[T]) -> anyhow::Result<Vec<u8>> {
     Ok(writer.into_inner()?)
 }
 
+/// The distinct `items` in the order they first appear: rows, columns and lines follow the
+/// config's order, not a sort.
+pub fn first_seen<T: PartialEq>(items: impl IntoIterator<Item = T>) -> Vec<T> {
+    let mut seen = Vec::new();
+    for item in items {
+        if !seen.contains(&item) {
+            seen.push(item);
+        }
+    }
+    seen
+}
+
 /// One table per localizer: each cell "mean pos cm / mean orient rad (success %)"; a policy row
 /// appears under a localizer only if that localizer ran it (missing task/split cells read "–").
 pub fn markdown(rows: &[ResultRow]) -> String {
-    let unique = |f: &dyn Fn(&ResultRow) -> String| {
-        let mut seen: Vec<String> = Vec::new();
-        for r in rows {
-            let v = f(r);
-            if !seen.contains(&v) {
-                seen.push(v);
-            }
-        }
-        seen
-    };
+    let unique = |f: &dyn Fn(&ResultRow) -> String| first_seen(rows.iter().map(f));
     let tasks = unique(&|r| r.task.name().to_owned());
     let splits = unique(&|r| r.split.clone());
     let mut text = String::from(
