@@ -30,6 +30,9 @@ use serde::{Deserialize, Serialize};
 /// Σ w, Σ w·cos(θ − θ_crop), Σ w·sin(θ − θ_crop).
 pub const BELIEF_CHANNELS: usize = 4;
 
+/// The coarsest overview cell, metres: 100 m across at 50 cells.
+const MAX_OVERVIEW_M: f32 = 2.0;
+
 /// Crop geometry and how many hypotheses to look at.
 #[derive(Resource, Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(default, deny_unknown_fields)]
@@ -77,7 +80,10 @@ impl StepParams for BeliefParams {
         expect_param(self.modes > 0, "modes", "at least 1 crop (the estimate)")?;
         expect_param(self.mode_bin_m > 0.0, "mode_bin_m", "a bin side > 0 m")?;
         if let Some(side) = self.overview_m {
-            expect_param(side >= self.resolution_m, "overview_m", "a cell side ≥ resolution_m")?;
+            // Each overview cell averages (side / map resolution)² map samples: bounded, so an
+            // absurd side is an error rather than a hang.
+            let ok = side >= self.resolution_m && side <= MAX_OVERVIEW_M;
+            expect_param(ok, "overview_m", "a cell side from resolution_m to 2 m")?;
         }
         crate::limits::BELIEF_HISTORY.check("history", self.history)
     }
@@ -292,6 +298,10 @@ mod tests {
         assert_eq!(partial(0), 0, "at the map's own resolution a cell is wall or free");
         assert!(partial(1) > 0, "a 0.4 m cell shows the 0.1 m walls it holds as partly occupied");
         assert!(crop.channel(1, 0).iter().all(|f| (0.0..=1.0).contains(f)));
+        for side in [0.05, 1e6, f32::NAN] {
+            let err = BeliefParams { overview_m: Some(side), ..Default::default() }.check().unwrap_err();
+            assert!(err.contains("overview_m") && err.contains("resolution_m to 2 m"), "{err}");
+        }
     }
 
     #[test]
