@@ -1,6 +1,10 @@
 //! What `apfn fuzz` feeds: one [`Target`] per kind of file a user hands apfn, each with its valid
 //! seed files and the very loader the CLI runs on it. Adding a parser is one entry in [`TARGETS`].
 
+use super::network_files::{
+    load_pfnet, load_policy, load_train_pfnet, load_train_sac, pfnet_corpus, policy_corpus,
+    train_config_corpus,
+};
 use crate::cli::run::SceneArgs;
 use crate::compose::{Pipeline, standard_registry};
 use crate::eval::EvalConfig;
@@ -68,6 +72,18 @@ pub const TARGETS: &[Target] = &[
         corpus: bag_corpus,
         load: |p| read_bag(p, &BagTopics::default()).map(drop).map_err(|e| e.to_string()),
     },
+    Target { name: "pfnet_checkpoint", corpus: pfnet_corpus, load: load_pfnet },
+    Target { name: "sac_policy", corpus: policy_corpus, load: load_policy },
+    Target {
+        name: "train_pfnet",
+        corpus: |root| train_config_corpus(root, "train_pfnet_"),
+        load: load_train_pfnet,
+    },
+    Target {
+        name: "train_sac",
+        corpus: |root| train_config_corpus(root, "train_sac_"),
+        load: load_train_sac,
+    },
 ];
 
 /// The target called `name`.
@@ -115,7 +131,7 @@ fn ron_corpus(root: &Path, folder: &str, kind: &str, extra: &[&str]) -> io::Resu
 }
 
 /// `Scene` for a file starting (after `//` comments) with `Scene(`.
-fn top_level_struct(text: &[u8]) -> Option<&str> {
+pub(super) fn top_level_struct(text: &[u8]) -> Option<&str> {
     let text = std::str::from_utf8(text).ok()?;
     let code = text.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with("//"))?;
     let name = &code[..code.find('(')?];
@@ -123,7 +139,7 @@ fn top_level_struct(text: &[u8]) -> Option<&str> {
 }
 
 /// `root/folder/*.ron`, sorted by name, as `("folder/name.ron", bytes)`.
-fn repo_files(root: &Path, folder: &str) -> io::Result<Vec<(String, Vec<u8>)>> {
+pub(super) fn repo_files(root: &Path, folder: &str) -> io::Result<Vec<(String, Vec<u8>)>> {
     let dir = root.join(folder);
     let mut names: Vec<String> = std::fs::read_dir(&dir)
         .map_err(|e| {

@@ -22,6 +22,25 @@ impl Default for AdamConfig {
     }
 }
 
+impl AdamConfig {
+    /// `Err("field: expected …")` for values with which Adam diverges or divides by zero.
+    pub fn check(&self) -> Result<(), String> {
+        let positive = |v: f32| v > 0.0 && v.is_finite();
+        if !positive(self.learning_rate) {
+            return Err(format!("learning_rate: expected a positive number, found {}", self.learning_rate));
+        }
+        for (field, beta) in [("beta1", self.beta1), ("beta2", self.beta2)] {
+            if !(0.0..1.0).contains(&beta) {
+                return Err(format!("{field}: expected a decay rate in [0, 1), found {beta}"));
+            }
+        }
+        if !positive(self.epsilon) {
+            return Err(format!("epsilon: expected a positive number, found {}", self.epsilon));
+        }
+        Ok(())
+    }
+}
+
 /// Optimizer state over a whole parameter arena: `m` and `v` are laid out like `Params::values`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Adam {
@@ -173,6 +192,20 @@ mod tests {
         assert_eq!(cfg, AdamConfig { learning_rate: 0.01, ..AdamConfig::default() });
         assert_eq!(AdamConfig::default().epsilon, 1e-7);
         assert!(serde_json::from_str::<AdamConfig>(r#"{"lr": 0.01}"#).is_err());
+        assert_eq!(AdamConfig::default().check(), Ok(()));
+        let err = |c: AdamConfig| c.check().unwrap_err();
+        assert_eq!(
+            err(AdamConfig { beta2: 1.0, ..cfg.clone() }),
+            "beta2: expected a decay rate in [0, 1), found 1"
+        );
+        assert_eq!(
+            err(AdamConfig { epsilon: 0.0, ..cfg.clone() }),
+            "epsilon: expected a positive number, found 0"
+        );
+        assert_eq!(
+            err(AdamConfig { learning_rate: f32::NAN, ..cfg }),
+            "learning_rate: expected a positive number, found NaN"
+        );
     }
 
     #[test]

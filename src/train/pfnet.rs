@@ -193,9 +193,16 @@ impl TrainPfNetConfig {
                 self.wide_box_m
             ));
         }
-        if !(self.adam.learning_rate > 0.0 && self.adam.learning_rate.is_finite()) {
-            return Err("adam.learning_rate: expected a positive number".into());
+        let (std_m, std_deg) = (self.init_std_m, self.init_std_deg);
+        if !((0.0..=100.0).contains(&std_m) && (0.0..=360.0).contains(&std_deg)) {
+            return Err(format!(
+                "init_std_m, init_std_deg: expected spreads of 0 to 100 m and 0 to 360°, found {std_m} and {std_deg}"
+            ));
         }
+        if !(self.heading_weight >= 0.0 && self.heading_weight.is_finite()) {
+            return Err(format!("heading_weight: expected a number ≥ 0, found {}", self.heading_weight));
+        }
+        self.adam.check().map_err(|e| format!("adam.{e}"))?;
         if let Some(rate) = self.final_learning_rate
             && !(rate >= 0.0 && rate <= self.adam.learning_rate)
         {
@@ -618,5 +625,30 @@ mod tests {
         );
         let wider = TrainPfNetConfig { wide_fraction: 1.5, ..config };
         assert_eq!(wider.check().unwrap_err(), "wide_fraction: expected 0 to 1, found 1.5");
+    }
+
+    /// Values the particle draws or the loss cannot use are refused while the config loads, not
+    /// by a panic in the first batch after minutes of simulating data.
+    #[test]
+    fn spreads_weights_and_adam_are_checked_by_name() {
+        let ok = TrainPfNetConfig::default();
+        assert_eq!(ok.check(), Ok(()));
+        let err = |c: TrainPfNetConfig| c.check().unwrap_err();
+        let spread = err(TrainPfNetConfig { init_std_m: -0.3, ..ok.clone() });
+        assert!(
+            spread.starts_with("init_std_m, init_std_deg: expected") && spread.ends_with("found -0.3 and 30")
+        );
+        assert!(
+            err(TrainPfNetConfig { init_std_deg: f32::NAN, ..ok.clone() }).ends_with("found 0.3 and NaN")
+        );
+        assert_eq!(
+            err(TrainPfNetConfig { heading_weight: f32::INFINITY, ..ok.clone() }),
+            "heading_weight: expected a number ≥ 0, found inf"
+        );
+        let adam = AdamConfig { beta1: -0.1, ..ok.adam.clone() };
+        assert_eq!(
+            err(TrainPfNetConfig { adam, ..ok }),
+            "adam.beta1: expected a decay rate in [0, 1), found -0.1"
+        );
     }
 }

@@ -9,6 +9,10 @@ use serde::{Deserialize, Serialize};
 /// (64 / 2)² feature cells per particle.
 pub const MAX_LOCAL_MAP_CELLS: usize = 64;
 
+/// Smallest side of a particle's local map, cells: the joint stage's 3 × 3 locally-connected
+/// layer, unpadded, needs its input (half the side) to be at least 4 cells for the 2 × 2 pool after it.
+pub const MIN_LOCAL_MAP_CELLS: usize = 8;
+
 /// One of a stage's parallel convolutions ('same' padding, stride 1), concatenated along channels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ConvBranch {
@@ -24,7 +28,7 @@ impl ConvBranch {
 
     /// Channels of a stage's concatenated output.
     pub fn channels_of(branches: &[ConvBranch]) -> usize {
-        branches.iter().map(|b| b.filters).sum()
+        branches.iter().fold(0, |sum, b| sum.saturating_add(b.filters))
     }
 
     /// The reference's layer name: `{prefix}_c{kernel}` plus `d{dilation}` when dilated.
@@ -199,6 +203,36 @@ impl PfNetConfig {
         (grid, depth, self.wide_view.map(|_| wide))
     }
 
+    /// The weights of the network's convolution and locally-connected kernels, counted without
+    /// building it. Every other tensor (biases, LayerNorm, the dense head) is smaller than a kernel
+    /// before it, so the network holds at most a few times this many values: a checkpoint whose
+    /// configuration asks for more than its file holds is refused before anything is allocated.
+    /// Saturates instead of overflowing on absurd sizes.
+    pub fn kernel_weights(&self) -> u64 {
+        let n = |v: usize| v as u64;
+        let stage = |c_in: usize, branches: &[ConvBranch]| {
+            branches.iter().fold(0u64, |sum, b| {
+                sum.saturating_add(
+                    n(b.filters).saturating_mul(n(c_in)).saturating_mul(n(b.kernel).saturating_pow(2)),
+                )
+            })
+        };
+        let encoder = |c_in: usize, first: &[ConvBranch], second: &[ConvBranch]| {
+            stage(c_in, first).saturating_add(stage(ConvBranch::channels_of(first), second))
+        };
+        let map_encoders = 1 + u64::from(self.wide_map_encoder());
+        let map = encoder(self.map_encoder_channels(), &self.map_stage1, &self.map_stage2);
+        let obs = encoder(self.obs_channels, &self.obs_stage1, &self.obs_stage2);
+        // Both locally-connected layers (3 × 3 unpadded, 5 × 5 padded by 1) give side − 2 outputs.
+        let joint_in = map_encoders
+            .saturating_mul(n(ConvBranch::channels_of(&self.map_stage2)))
+            .saturating_add(n(ConvBranch::channels_of(&self.obs_stage2)));
+        let positions = n((self.local_map.cells / 2).saturating_sub(2)).saturating_pow(2);
+        let joint =
+            positions.saturating_mul(n(self.joint_filters)).saturating_mul(joint_in.saturating_mul(9 + 25));
+        map_encoders.saturating_mul(map).saturating_add(obs).saturating_add(joint)
+    }
+
     /// `Err("field: expected …")` when the configuration cannot build a network.
     pub fn check(&self) -> Result<(), String> {
         let stages = [
@@ -241,11 +275,12 @@ impl PfNetConfig {
         }
         if self.local_map.cells * 2 != self.obs_cells
             || !self.local_map.cells.is_multiple_of(4)
-            || self.local_map.cells > MAX_LOCAL_MAP_CELLS
+            || !(MIN_LOCAL_MAP_CELLS..=MAX_LOCAL_MAP_CELLS).contains(&self.local_map.cells)
         {
             return Err(format!(
-                "local_map.cells, obs_cells: expected a multiple of 4 up to {MAX_LOCAL_MAP_CELLS} and twice \
-                 it (the encoders meet at a quarter of the observation), found {} and {}",
+                "local_map.cells, obs_cells: expected a multiple of 4 from {MIN_LOCAL_MAP_CELLS} to \
+                 {MAX_LOCAL_MAP_CELLS} and twice it (the encoders meet at a quarter of the observation), \
+                 found {} and {}",
                 self.local_map.cells, self.obs_cells
             ));
         }
@@ -260,6 +295,7 @@ impl PfNetConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::nn::pfnet::PfNet;
 
     #[test]
     fn observation_channels_are_checked_by_name() {
@@ -303,9 +339,31 @@ mod tests {
     }
 
     #[test]
+    fn kernel_weights_bound_the_network_from_below_within_a_small_factor() {
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: false };
+        let configs = [
+            PfNetConfig::paper(),
+            PfNetConfig::compact(),
+            PfNetConfig::compact().observing(Observation::GridAndDepth).with_wide_view(Some(view)),
+            PfNetConfig::compact().with_wide_view(Some(WideView { own_map_encoder: true, ..view })),
+        ];
+        for config in configs {
+            let (kernels, total) =
+                (config.kernel_weights(), PfNet::new(config.clone(), 0).unwrap().params.len() as u64);
+            assert!(
+                kernels <= total && total <= 4 * kernels,
+                "{kernels} kernel weights of {total}: {config:?}"
+            );
+        }
+        let absurd = PfNetConfig { joint_filters: usize::MAX, ..PfNetConfig::compact() };
+        assert_eq!(absurd.kernel_weights(), u64::MAX, "saturates");
+    }
+
+    #[test]
     fn local_map_sides_are_checked_by_name() {
         assert!(PfNetConfig::paper().check().is_ok() && PfNetConfig::compact().check().is_ok());
-        for (cells, obs_cells) in [(30, 60), (28, 50), (MAX_LOCAL_MAP_CELLS + 4, 2 * MAX_LOCAL_MAP_CELLS + 8)]
+        for (cells, obs_cells) in
+            [(30, 60), (28, 50), (4, 8), (MAX_LOCAL_MAP_CELLS + 4, 2 * MAX_LOCAL_MAP_CELLS + 8)]
         {
             let mut config = PfNetConfig::compact();
             (config.local_map.cells, config.obs_cells) = (cells, obs_cells);

@@ -45,6 +45,14 @@ impl PfNet {
         let text = file.metadata.get(CONFIG_KEY).ok_or_else(|| metadata("a PfNetConfig (RON)".into()))?;
         let config: PfNetConfig =
             ron::from_str(text).map_err(|e| metadata(format!("a PfNetConfig (RON): {e}")))?;
+        config.check().map_err(|e| metadata(format!("a valid PfNetConfig: {e}")))?;
+        let held: u64 = file.tensors.iter().map(|t| t.data.len() as u64).sum();
+        if config.kernel_weights() > held {
+            return Err(metadata(format!(
+                "a PfNetConfig of at most the {held} weights the file holds; its kernels alone need {}",
+                config.kernel_weights()
+            )));
+        }
         let mut model = PfNet::new(config, 0).map_err(|e| metadata(format!("a valid PfNetConfig: {e}")))?;
         let mut values = std::mem::take(&mut model.params.values);
         file.read_buffer(&model.params, &mut values, "")?;
@@ -85,6 +93,20 @@ mod tests {
             ll
         };
         assert_eq!(run(&loaded), run(&model), "a loaded network computes the same bytes");
+    }
+
+    #[test]
+    fn a_checkpoint_asking_for_a_larger_network_than_it_holds_is_refused_before_building_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("inflated.safetensors");
+        let mut file = PfNet::new(PfNetConfig::compact(), 0).unwrap().to_checkpoint(BTreeMap::new());
+        let huge = PfNetConfig { joint_filters: 1 << 40, ..PfNetConfig::compact() };
+        file.metadata.insert(CONFIG_KEY.into(), ron::to_string(&huge).unwrap());
+        file.save(&path).unwrap();
+        let err = PfNet::load(&path).unwrap_err().to_string();
+        for part in ["inflated.safetensors", CONFIG_KEY, "weights the file holds"] {
+            assert!(err.contains(part), "{part:?} missing from: {err}");
+        }
     }
 
     #[test]

@@ -61,14 +61,43 @@ impl SacNetConfig {
         2 * self.encoder_fc + self.state_len()
     }
 
+    /// Side of an encoder's last feature map for an input of side `side`; `None` when the
+    /// stride-2 3×3 convolutions run out of pixels.
+    fn encoded_side(&self, side: usize) -> Option<usize> {
+        self.conv_channels.iter().try_fold(side, |s, _| (s >= 3).then(|| (s - 3) / 2 + 1))
+    }
+
+    /// The weights of every convolution and dense layer, counted without building the networks
+    /// (each bias is smaller than its weights, so the networks hold less than twice this): a
+    /// policy file whose configuration asks for more than the file holds is refused before
+    /// anything is allocated. Saturates instead of overflowing on absurd sizes. Assumes `check`.
+    pub fn weights(&self) -> u64 {
+        let n = |v: usize| v as u64;
+        let mul = |a: u64, b: u64| a.saturating_mul(b);
+        let encoder = |c_in: usize, side: usize| {
+            let (convs, last) = self.conv_channels.iter().fold((0u64, n(c_in)), |(sum, c_prev), &c| {
+                (sum.saturating_add(mul(mul(c_prev, n(c)), 9)), n(c))
+            });
+            let flat = mul(last, n(self.encoded_side(side).unwrap_or(0)).saturating_pow(2));
+            convs.saturating_add(mul(flat, n(self.encoder_fc)))
+        };
+        let (f, w) =
+            (n(self.encoder_fc).saturating_mul(2).saturating_add(n(self.state_len())), n(self.mlp_width));
+        // Two critics (features and action in, one value out) and the actor (mean and log σ out).
+        let mlp = |inputs: u64, outputs: u64| mul(w, inputs.saturating_add(w).saturating_add(outputs));
+        [
+            encoder(self.belief_channels, self.belief_cells),
+            encoder(1, self.grid_cells),
+            mul(2, mlp(f.saturating_add(n(ACTION_LEN)), 1)),
+            mlp(f, n(2 * ACTION_LEN)),
+        ]
+        .into_iter()
+        .fold(0, u64::saturating_add)
+    }
+
     /// `Err("field: expected …")` when the shapes cannot build a network.
     pub fn check(&self) -> Result<(), String> {
-        let fits = |side: usize| {
-            self.conv_channels
-                .iter()
-                .try_fold(side, |s, _| (s >= 3).then(|| (s - 3) / 2 + 1))
-                .is_some_and(|s| s >= 1)
-        };
+        let fits = |side: usize| self.encoded_side(side).is_some_and(|s| s >= 1);
         let positive =
             |v: usize, field: &str| if v > 0 { Ok(()) } else { Err(format!("{field}: expected ≥ 1")) };
         positive(self.conv_channels.len(), "conv_channels")?;
@@ -93,6 +122,23 @@ impl SacNetConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::nn::sac::SacNetworks;
+
+    #[test]
+    fn weights_count_every_weight_and_bound_the_networks() {
+        let tiny = SacNetConfig {
+            conv_channels: vec![2],
+            belief_cells: 3,
+            grid_cells: 5,
+            ..SacNetConfig::compact()
+        };
+        for config in [SacNetConfig::paper(), SacNetConfig::compact(), tiny] {
+            let (weights, total) = (config.weights(), SacNetworks::zeros(&config).params.len() as u64);
+            assert!(weights < total && total < 2 * weights, "{weights} weights of {total}: {config:?}");
+        }
+        let absurd = SacNetConfig { mlp_width: usize::MAX, ..SacNetConfig::compact() };
+        assert_eq!(absurd.weights(), u64::MAX, "saturates");
+    }
 
     #[test]
     fn configs_check_and_bad_shapes_name_the_field() {

@@ -57,6 +57,14 @@ impl SacNetworks {
         let config: SacNetConfig = ron::from_str(text)
             .map_err(|e| metadata_error(file, CONFIG_KEY, format!("a SacNetConfig (RON): {e}")))?;
         config.check().map_err(|e| metadata_error(file, CONFIG_KEY, format!("a valid SacNetConfig: {e}")))?;
+        let held: u64 = file.tensors.iter().map(|t| t.data.len() as u64).sum();
+        if config.weights() > held {
+            let expected = format!(
+                "a SacNetConfig of at most the {held} weights the file holds; it needs {}",
+                config.weights()
+            );
+            return Err(metadata_error(file, CONFIG_KEY, expected));
+        }
         let mut nets = SacNetworks::zeros(&config);
         let mut values = std::mem::take(&mut nets.params.values);
         file.read_buffer(&nets.params, &mut values, "")?;
@@ -146,5 +154,19 @@ mod tests {
         let policy_only = SacNetworks::load(&path).unwrap().to_checkpoint();
         let err = SacLearner::from_checkpoint(&policy_only).unwrap_err().to_string();
         assert!(err.contains("sac_learner"), "{err}");
+    }
+
+    #[test]
+    fn a_policy_asking_for_wider_networks_than_it_holds_is_refused_before_building_them() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("inflated.safetensors");
+        let mut file = SacNetworks::zeros(&SacNetConfig::compact()).to_checkpoint();
+        let wide = SacNetConfig { mlp_width: 1 << 40, ..SacNetConfig::compact() };
+        file.metadata.insert(CONFIG_KEY.into(), ron::to_string(&wide).unwrap());
+        file.save(&path).unwrap();
+        let err = SacNetworks::load(&path).unwrap_err().to_string();
+        for part in ["inflated.safetensors", CONFIG_KEY, "weights the file holds"] {
+            assert!(err.contains(part), "{part:?} missing from: {err}");
+        }
     }
 }
