@@ -82,9 +82,6 @@ impl TrainSacConfig {
             "compact" => SacNetConfig::compact(),
             other => return Err(format!("network: expected `paper` or `compact`, found `{other}`")),
         };
-        if self.depth_columns > 0 {
-            crate::limits::DEPTH_COLUMNS.check("depth_columns", self.depth_columns)?;
-        }
         crate::limits::BELIEF_MODES.check("belief_modes", self.belief_modes)?;
         crate::limits::BELIEF_HISTORY.check("belief_history", self.belief_history)?;
         // The overview's cell side is the schedule's; only whether there is one counts here.
@@ -94,7 +91,10 @@ impl TrainSacConfig {
             overview_m: self.belief_overview.then_some(0.4),
             ..Default::default()
         };
-        Ok(SacNetConfig { depth_columns: self.depth_columns, belief_channels: crops.channels(), ..named })
+        let config =
+            SacNetConfig { depth_columns: self.depth_columns, belief_channels: crops.channels(), ..named };
+        config.check()?;
+        Ok(config)
     }
 
     pub fn check(&self) -> Result<(), String> {

@@ -70,7 +70,7 @@ impl SacNetConfig {
     /// The weights of every convolution and dense layer, counted without building the networks
     /// (each bias is smaller than its weights, so the networks hold less than twice this): a
     /// policy file whose configuration asks for more than the file holds is refused before
-    /// anything is allocated. Saturates instead of overflowing on absurd sizes. Assumes `check`.
+    /// anything is allocated. Saturates instead of overflowing on absurd sizes.
     pub fn weights(&self) -> u64 {
         let n = |v: usize| v as u64;
         let mul = |a: u64, b: u64| a.saturating_mul(b);
@@ -107,6 +107,9 @@ impl SacNetConfig {
         positive(self.encoder_fc, "encoder_fc")?;
         positive(self.mlp_width, "mlp_width")?;
         positive(self.belief_channels, "belief_channels")?;
+        if self.depth_columns > 0 {
+            crate::limits::DEPTH_COLUMNS.check("depth_columns", self.depth_columns)?;
+        }
         for (side, field) in [(self.belief_cells, "belief_cells"), (self.grid_cells, "grid_cells")] {
             if !fits(side) {
                 return Err(format!(
