@@ -1,9 +1,9 @@
 //! What `apfn fuzz` feeds: one [`Target`] per kind of file a user hands apfn, each with its valid
 //! seed files and the very loader the CLI runs on it. Adding a parser is one entry in [`TARGETS`].
 
-use super::network_files::{
-    load_pfnet, load_policy, load_train_pfnet, load_train_sac, pfnet_corpus, policy_corpus,
-    train_config_corpus,
+use super::learning_files::{
+    collection_corpus, load_collection_of, load_pfnet, load_policy, load_train_pfnet, load_train_sac,
+    pfnet_corpus, policy_corpus, train_config_corpus,
 };
 use crate::cli::run::SceneArgs;
 use crate::compose::{Pipeline, standard_registry};
@@ -84,6 +84,7 @@ pub const TARGETS: &[Target] = &[
         corpus: |root| train_config_corpus(root, "train_sac_"),
         load: load_train_sac,
     },
+    Target { name: "collection", corpus: collection_corpus, load: load_collection_of },
 ];
 
 /// The target called `name`.

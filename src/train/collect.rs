@@ -14,6 +14,7 @@ use crate::world::Pose2;
 use crate::world::map::procedural::{ApartmentParams, Split, generate_apartment};
 use crate::world::map::{NetworkMap, write_atomically};
 use anyhow::{Context, bail};
+use safetensors::SafeTensors;
 use safetensors::tensor::{Dtype, TensorView};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -137,7 +138,8 @@ fn encode_shard(set: &EpisodeSet) -> anyhow::Result<Vec<u8>> {
     Ok(safetensors::serialize(tensors, Some(metadata))?)
 }
 
-/// Reads every shard of a collection back into one episode set (maps regenerated from their names).
+/// Reads every shard of a collection back into one episode set (maps regenerated from their
+/// names). A damaged or foreign file is an error naming it and the tensor or field at fault.
 pub fn load_collection(dir: &Path) -> anyhow::Result<EpisodeSet> {
     let manifest_path = dir.join("manifest.json");
     let manifest: Manifest = serde_json::from_str(
@@ -145,64 +147,157 @@ pub fn load_collection(dir: &Path) -> anyhow::Result<EpisodeSet> {
             .with_context(|| format!("reading {}", manifest_path.display()))?,
     )
     .with_context(|| format!("{}: not a collection manifest", manifest_path.display()))?;
-    let config: CollectConfig = ron::from_str(&manifest.config)?;
+    let config: CollectConfig = ron::from_str(&manifest.config)
+        .with_context(|| format!("{}: field `config`: not a collect config", manifest_path.display()))?;
+    config
+        .apartment
+        .validate()
+        .with_context(|| format!("{}: field `config`: apartment", manifest_path.display()))?;
     let mut all = EpisodeSet::default();
     for file in &manifest.shards {
         let path = dir.join(file);
         let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-        let shard = safetensors::SafeTensors::deserialize(&bytes)
-            .with_context(|| format!("{}: not a shard", path.display()))?;
-        let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)?;
-        let names = meta.metadata().as_ref().and_then(|m| m.get("maps")).cloned().unwrap_or_default();
-        let wide_extent_m = match meta.metadata().as_ref().and_then(|m| m.get("wide_extent_m")) {
-            Some(text) => Some(
-                text.parse::<f32>()
-                    .with_context(|| format!("{}: metadata `wide_extent_m`: `{text}`", path.display()))?,
-            ),
-            None => None,
-        };
-        // Shards of a schedule without a wide window hold one grid.
-        let wide_grids = match wide_extent_m {
-            Some(_) => shard
-                .tensor("wide_grids")
-                .with_context(|| format!("{}: tensor `wide_grids`", path.display()))?
-                .data()
-                .to_vec(),
-            None => vec![],
-        };
-        let first_map = all.maps.len();
-        for name in names.split(',').filter(|n| !n.is_empty()) {
+        let mut shard = read_shard(&bytes).with_context(|| format!("{}: not a shard", path.display()))?;
+        for name in &shard.map_names {
             let seed: u64 = name
-                .trim_start_matches("apartment_")
-                .parse()
-                .with_context(|| format!("{}: map `{name}`", path.display()))?;
-            all.maps.push(NetworkMap::from_fine(&generate_apartment(seed, &config.apartment), 0.1));
-            all.map_names.push(name.to_string());
+                .strip_prefix("apartment_")
+                .and_then(|n| n.parse().ok())
+                .with_context(|| format!("{}: map `{name}`: expected apartment_<seed>", path.display()))?;
+            shard.maps.push(NetworkMap::from_fine(&generate_apartment(seed, &config.apartment), 0.1));
         }
-        let floats = |name: &str| -> anyhow::Result<Vec<f32>> {
-            let view = shard.tensor(name).with_context(|| format!("{}: tensor `{name}`", path.display()))?;
-            Ok(view.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
-        };
-        let grids = shard.tensor("grids").with_context(|| format!("{}: tensor `grids`", path.display()))?;
-        let (e, t, c) = (grids.shape()[0], grids.shape()[1], grids.shape()[2]);
-        let (poses, odometry, maps) = (floats("poses")?, floats("odometry")?, floats("map")?);
-        // Shards of a schedule without the `depth` step hold no strips.
-        let columns = shard.tensor("depths").map_or(0, |view| view.shape()[2]);
-        let depths = if columns > 0 { floats("depths")? } else { vec![] };
-        let pose = |v: &[f32], i: usize| Pose2::new(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
-        for (k, &map) in maps.iter().enumerate().take(e) {
-            all.episodes.push(RecordedEpisode {
-                map: first_map + map as usize,
-                poses: (0..t).map(|s| pose(&poses, k * t + s)).collect(),
-                odometry: (0..t).map(|s| pose(&odometry, k * t + s)).collect(),
-                grids: grids.data()[k * t * c * c..(k + 1) * t * c * c].to_vec(),
-                wide_grids: wide_grids.get(k * t * c * c..(k + 1) * t * c * c).unwrap_or_default().to_vec(),
-                depths: depths.get(k * t * columns..(k + 1) * t * columns).unwrap_or_default().to_vec(),
-            });
-        }
-        all.grid_cells = c;
-        all.depth_columns = columns;
-        all.wide_extent_m = wide_extent_m;
+        all.extend(shard).with_context(|| format!("{}: unlike the shards before it", path.display()))?;
     }
     Ok(all)
+}
+
+/// One shard's episodes, their `map` indexing its own `map_names` (no maps generated), every
+/// tensor checked against the layout `encode_shard` writes.
+fn read_shard(bytes: &[u8]) -> anyhow::Result<EpisodeSet> {
+    let shard = SafeTensors::deserialize(bytes)?;
+    let (_, meta) = SafeTensors::read_metadata(bytes)?;
+    let metadata = meta.metadata().clone().unwrap_or_default();
+    let map_names: Vec<String> = metadata
+        .get("maps")
+        .map_or("", String::as_str)
+        .split(',')
+        .filter(|n| !n.is_empty())
+        .map(String::from)
+        .collect();
+    crate::limits::MAPS.check("metadata `maps`", map_names.len()).map_err(anyhow::Error::msg)?;
+    let wide_extent_m = match metadata.get("wide_extent_m") {
+        Some(text) => Some(
+            text.parse::<f32>()
+                .ok()
+                .filter(|m| m.is_finite() && *m > 0.0)
+                .with_context(|| format!("metadata `wide_extent_m`: expected metres > 0, found `{text}`"))?,
+        ),
+        None => None,
+    };
+    let grids = shard_tensor(&shard, "grids", Dtype::U8, &[None, None, None, None])?;
+    let [e, t, c] = [0, 1, 2].map(|i| grids.shape()[i]);
+    anyhow::ensure!(
+        grids.shape()[3] == c && t > 0,
+        "tensor `grids`: expected [E, T ≥ 1, C, C], found {:?}",
+        grids.shape()
+    );
+    let floats = |name: &str, shape: &[Option<usize>]| -> anyhow::Result<Vec<f32>> {
+        let view = shard_tensor(&shard, name, Dtype::F32, shape)?;
+        Ok(view.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
+    };
+    let poses = floats("poses", &[Some(e), Some(t), Some(3)])?;
+    let odometry = floats("odometry", &[Some(e), Some(t), Some(3)])?;
+    let maps = floats("map", &[Some(e)])?;
+    // Shards of a schedule without the `depth` step hold no strips, without a wide window one grid.
+    let columns = shard.tensor("depths").map_or(0, |view| view.shape().get(2).copied().unwrap_or(0));
+    let depths = if columns > 0 { floats("depths", &[Some(e), Some(t), Some(columns)])? } else { vec![] };
+    let wide = match wide_extent_m {
+        Some(_) => shard_tensor(&shard, "wide_grids", Dtype::U8, &[Some(e), Some(t), Some(c), Some(c)])?
+            .data()
+            .to_vec(),
+        None => vec![],
+    };
+    let grids = grids.data();
+    let pose = |v: &[f32], i: usize| Pose2::new(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
+    let (per_grid, per_strip) = (t * c * c, t * columns);
+    let episodes = (0..e)
+        .map(|k| {
+            let map = maps[k];
+            anyhow::ensure!(
+                map >= 0.0 && map.fract() == 0.0 && (map as usize) < map_names.len(),
+                "tensor `map`: episode {k}'s map {map}, expected an index below the {} names of metadata `maps`",
+                map_names.len()
+            );
+            Ok(RecordedEpisode {
+                map: map as usize,
+                poses: (0..t).map(|s| pose(&poses, k * t + s)).collect(),
+                odometry: (0..t).map(|s| pose(&odometry, k * t + s)).collect(),
+                grids: grids[k * per_grid..(k + 1) * per_grid].to_vec(),
+                wide_grids: wide.get(k * per_grid..(k + 1) * per_grid).unwrap_or_default().to_vec(),
+                depths: depths.get(k * per_strip..(k + 1) * per_strip).unwrap_or_default().to_vec(),
+            })
+        })
+        .collect::<anyhow::Result<_>>()?;
+    Ok(EpisodeSet {
+        map_names,
+        episodes,
+        grid_cells: c,
+        depth_columns: columns,
+        wide_extent_m,
+        ..EpisodeSet::default()
+    })
+}
+
+/// The shard's tensor `name`, checked to hold `dtype` in `shape` (`None`: any length).
+fn shard_tensor<'a>(
+    shard: &'a SafeTensors,
+    name: &str,
+    dtype: Dtype,
+    shape: &[Option<usize>],
+) -> anyhow::Result<TensorView<'a>> {
+    let view = shard.tensor(name).with_context(|| format!("tensor `{name}`"))?;
+    let fits = view.shape().len() == shape.len()
+        && view.shape().iter().zip(shape).all(|(&n, want)| want.is_none_or(|w| w == n));
+    anyhow::ensure!(
+        view.dtype() == dtype && fits,
+        "tensor `{name}`: expected {dtype:?} {shape:?} (None: any length), found {:?} {:?}",
+        view.dtype(),
+        view.shape()
+    );
+    Ok(view)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A shard of one 2-step episode on 2 × 2 grids with `poses` of shape `poses` and `map`'s
+    /// one value `map`.
+    fn shard(poses: Vec<usize>, map: f32) -> Vec<u8> {
+        let floats = |n: usize| vec![0u8; 4 * n];
+        let (grids, poses_bytes, odometry) = (vec![0u8; 8], floats(poses.iter().product()), floats(6));
+        let map_bytes = map.to_le_bytes();
+        let tensors = [
+            ("grids", TensorView::new(Dtype::U8, vec![1, 2, 2, 2], &grids).unwrap()),
+            ("poses", TensorView::new(Dtype::F32, poses, &poses_bytes).unwrap()),
+            ("odometry", TensorView::new(Dtype::F32, vec![1, 2, 3], &odometry).unwrap()),
+            ("map", TensorView::new(Dtype::F32, vec![1], &map_bytes).unwrap()),
+        ];
+        let metadata = HashMap::from([("maps".to_string(), "apartment_1".to_string())]);
+        safetensors::serialize(tensors, Some(metadata)).unwrap()
+    }
+
+    /// Shapes that disagree and indices beyond the shard's maps are errors naming the tensor,
+    /// not an index out of bounds.
+    #[test]
+    fn a_shard_whose_tensors_disagree_is_refused_by_name() {
+        let read = read_shard(&shard(vec![1, 2, 3], 0.0)).unwrap();
+        assert_eq!((read.episodes.len(), read.steps(), read.grid_cells), (1, 2, 2));
+        let short = read_shard(&shard(vec![1, 1, 3], 0.0)).unwrap_err().to_string();
+        assert!(short.starts_with("tensor `poses`: expected F32 [Some(1), Some(2), Some(3)]"), "{short}");
+        let beyond = read_shard(&shard(vec![1, 2, 3], 1.0)).unwrap_err().to_string();
+        assert!(
+            beyond.starts_with("tensor `map`: episode 0's map 1, expected an index below the 1 names"),
+            "{beyond}"
+        );
+    }
 }

@@ -1,5 +1,5 @@
-//! The neural side's user files for `apfn fuzz`: PF-net checkpoints, SAC policies and the two
-//! training configs. Checkpoints carry their network's shape as RON in the safetensors header, so
+//! The learned half's files for `apfn fuzz`: PF-net checkpoints, SAC policies, the two training
+//! configs and `apfn collect`'s episode collections. Checkpoints carry their network's shape as RON in the safetensors header, so
 //! a damaged or hand-edited file can ask for any size of network: the corpus holds the shipped
 //! compact shape (mostly weights, so flips land in the data) and a tiny one (mostly header, so
 //! edits land in the shape and the tensor table).
@@ -9,6 +9,7 @@ use crate::compose::read_ron;
 use crate::nn::checkpoint::{Checkpoint, Storage};
 use crate::nn::pfnet::{ConvBranch, LocalMapSpec, PfNet, PfNetConfig};
 use crate::nn::sac::{SacNetConfig, SacNetworks};
+use crate::train::collect::{CollectConfig, collect, load_collection};
 use crate::train::pfnet::TrainPfNetConfig;
 use crate::train::sac::TrainSacConfig;
 use std::collections::BTreeMap;
@@ -29,6 +30,11 @@ pub fn load_policy(path: &Path) -> Result<(), String> {
 pub fn load_train_pfnet(path: &Path) -> Result<(), String> {
     let config: TrainPfNetConfig = read_ron(path).map_err(|e| e.to_string())?;
     config.check().map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Reads a collection as `train-pfnet` does for `data: Some(folder)`; the entry file is its shard.
+pub fn load_collection_of(shard: &Path) -> Result<(), String> {
+    load_collection(shard.parent().unwrap_or(Path::new("."))).map(drop).map_err(|e| format!("{e:#}"))
 }
 
 /// Reads and checks a `train-sac` config: what the CLI does before building the world.
@@ -75,6 +81,27 @@ fn tiny_pfnet() -> PfNetConfig {
         joint_filters: 1,
         ..PfNetConfig::compact()
     }
+}
+
+/// A collection of two 3-step episodes on one apartment, written by `apfn collect`'s code with
+/// the repository's schedule: the shard first (the file mutated most), then the manifest.
+pub fn collection_corpus(root: &Path) -> io::Result<Vec<Sample>> {
+    let dir = tempfile_dir()?;
+    let config = CollectConfig {
+        shards: 1,
+        maps_per_shard: 1,
+        episodes_per_shard: 2,
+        steps: 3,
+        schedule: root.join("systems/collect_pfnet.ron").to_string_lossy().into_owned(),
+        ..CollectConfig::default()
+    };
+    collect(&config, &dir, |_, _| {}).map_err(|e| io::Error::other(format!("{e:#}")))?;
+    let files = ["shard_00000.safetensors", "manifest.json"]
+        .into_iter()
+        .map(|name| Ok((format!("data/{name}"), std::fs::read(dir.join(name))?)))
+        .collect::<io::Result<Vec<_>>>()?;
+    std::fs::remove_dir_all(&dir)?;
+    Ok(vec![Sample { files }])
 }
 
 /// A checkpoint's bytes as `models/input.safetensors`.
