@@ -230,6 +230,20 @@ impl ReplayBuffer {
         loaded.actions = f32s(tensor("actions")?);
         loaded.rewards = f32s(tensor("rewards")?);
         loaded.dones = f32s(tensor("dones")?);
+        // A damaged id would fail `sample`'s assertion hours into the resumed run: check every
+        // live transition's observations now.
+        for (i, &id) in loaded.obs[..loaded.len()].iter().chain(&loaded.next_obs[..loaded.len()]).enumerate()
+        {
+            anyhow::ensure!(
+                id < loaded.obs_written && loaded.obs_written - id <= loaded.obs_capacity as u64,
+                "{}: tensor `{}`: observation {id} at {}, expected one of the last {} of the {} written",
+                path.display(),
+                if i < loaded.len() { "obs" } else { "next_obs" },
+                i % loaded.len(),
+                loaded.obs_capacity,
+                loaded.obs_written
+            );
+        }
         Ok(loaded)
     }
 }
@@ -296,5 +310,16 @@ mod tests {
         let other = ReplayBuffer::new(8, 3, 1, shape());
         let err = ReplayBuffer::load(&path, &other).unwrap_err().to_string();
         assert!(err.contains("replay.safetensors"), "{err}");
+
+        let mut damaged = buffer.clone();
+        damaged.next_obs[0] = 7;
+        damaged.save(&path).unwrap();
+        let err = ReplayBuffer::load(&path, &empty).unwrap_err().to_string();
+        assert!(
+            err.ends_with(
+                "tensor `next_obs`: observation 7 at 0, expected one of the last 9 of the 2 written"
+            ),
+            "{err}"
+        );
     }
 }
