@@ -546,12 +546,9 @@ impl TrainState {
         let mut adam = Adam::new(config.adam.clone(), model.params.len());
         file.read_buffer(&model.params, &mut adam.m, ADAM_M)?;
         file.read_buffer(&model.params, &mut adam.v, ADAM_V)?;
-        let number = |key: &str| {
-            file.metadata.get(key).ok_or_else(|| anyhow::anyhow!("checkpoint: metadata `{key}` is missing"))
-        };
-        adam.step = number("adam_step")?.parse()?;
-        let step = number("step")?.parse()?;
-        let best_val_loss = number("best_val_loss")?.parse()?;
+        adam.step = metadata_number(file, "adam_step")?;
+        let step = metadata_number(file, "step")?;
+        let best_val_loss = metadata_number(file, "best_val_loss")?;
         Ok(Self { model, adam, step, best_val_loss })
     }
 
@@ -577,6 +574,16 @@ impl TrainState {
         self.step += 1;
         loss
     }
+}
+
+/// The training checkpoint's metadata `key`, a number, or an error naming the file and the key.
+fn metadata_number<T: std::str::FromStr>(file: &Checkpoint, key: &str) -> anyhow::Result<T>
+where
+    T::Err: std::fmt::Display,
+{
+    let path = file.source.as_deref().unwrap_or(Path::new("checkpoint")).display();
+    let text = file.metadata.get(key).with_context(|| format!("{path}: metadata `{key}` is missing"))?;
+    text.parse().map_err(|e| anyhow::anyhow!("{path}: metadata `{key}`: `{text}` is not a number: {e}"))
 }
 
 #[cfg(test)]
@@ -625,6 +632,19 @@ mod tests {
         );
         let wider = TrainPfNetConfig { wide_fraction: 1.5, ..config };
         assert_eq!(wider.check().unwrap_err(), "wide_fraction: expected 0 to 1, found 1.5");
+    }
+
+    #[test]
+    fn a_training_checkpoint_with_damaged_metadata_names_the_key() {
+        let config = TrainPfNetConfig::default();
+        let mut file = TrainState::new(&config).unwrap().to_checkpoint(&config);
+        file.metadata.insert("step".into(), "12x".into());
+        let err = TrainState::from_checkpoint(&file, &config).err().expect("a damaged step").to_string();
+        assert!(err.starts_with("checkpoint: metadata `step`: `12x` is not a number"), "{err}");
+        file.metadata.remove("best_val_loss");
+        file.metadata.insert("step".into(), "12".into());
+        let err = TrainState::from_checkpoint(&file, &config).err().expect("a missing key").to_string();
+        assert_eq!(err, "checkpoint: metadata `best_val_loss` is missing");
     }
 
     /// Values the particle draws or the loss cannot use are refused while the config loads, not
