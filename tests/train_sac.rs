@@ -61,6 +61,7 @@ fn resumed_training_writes_the_same_checkpoint() {
     }
     first.save_state(&split).unwrap();
     drop(first);
+    let config_again = config.clone();
     let mut resumed = SacTrainer::resume(config, &path, &split).unwrap();
     assert_eq!(resumed.step, 8);
     while resumed.step < 16 {
@@ -76,6 +77,17 @@ fn resumed_training_writes_the_same_checkpoint() {
         .filter(|e| e.file_name().to_string_lossy().starts_with("replay_"))
         .collect();
     assert_eq!(replays.len(), 1, "older replay buffers are removed once a newer state names its own");
+
+    // A state whose step is damaged is refused by name, not resumed mid-episode.
+    let mut state = apfn::nn::checkpoint::Checkpoint::load(&split.join(STATE_FILE)).unwrap();
+    state.metadata.insert("train_step".into(), "[6]".into());
+    state.save(&split.join(STATE_FILE)).unwrap();
+    let err =
+        SacTrainer::resume(config_again, &path, &split).err().expect("a step off the boundary").to_string();
+    assert!(
+        err.ends_with("metadata `train_step`: step 6, expected an episode boundary (a multiple of 4)"),
+        "{err}"
+    );
 }
 
 /// Points `config` at a copy of its schedule with the first `step` line replaced by `with`.

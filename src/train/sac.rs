@@ -223,15 +223,28 @@ impl SacTrainer {
             state.display(),
             path.display()
         );
-        let number = |key: &str| -> anyhow::Result<Vec<u64>> {
+        let numbers = |key: &str, len: usize| -> anyhow::Result<Vec<u64>> {
             let text = file
                 .metadata
                 .get(key)
                 .with_context(|| format!("{}: metadata `{key}` missing", state.display()))?;
-            ron::from_str(text).with_context(|| format!("{}: metadata `{key}`", state.display()))
+            let numbers: Vec<u64> =
+                ron::from_str(text).with_context(|| format!("{}: metadata `{key}`", state.display()))?;
+            anyhow::ensure!(
+                numbers.len() == len,
+                "{}: metadata `{key}`: expected {len} numbers, found `{text}`",
+                state.display()
+            );
+            Ok(numbers)
         };
-        let step = number(STEP_KEY)?[0];
-        let counts = number(COUNTS_KEY)?;
+        let step = numbers(STEP_KEY, 1)?[0];
+        anyhow::ensure!(
+            step.is_multiple_of(trainer.episode_steps),
+            "{}: metadata `{STEP_KEY}`: step {step}, expected an episode boundary (a multiple of {})",
+            state.display(),
+            trainer.episode_steps
+        );
+        let counts = numbers(COUNTS_KEY, 3)?;
         let learner = SacLearner::from_checkpoint(&file)?;
         let mut agent = trainer.agent_mut();
         agent.replay = crate::agent::sac::ReplayBuffer::load(&dir.join(replay_file(step)), &agent.replay)?;
