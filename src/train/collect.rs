@@ -196,8 +196,8 @@ fn read_shard(bytes: &[u8]) -> anyhow::Result<EpisodeSet> {
     let grids = shard_tensor(&shard, "grids", Dtype::U8, &[None, None, None, None])?;
     let [e, t, c] = [0, 1, 2].map(|i| grids.shape()[i]);
     anyhow::ensure!(
-        grids.shape()[3] == c && t > 0,
-        "tensor `grids`: expected [E, T ≥ 1, C, C], found {:?}",
+        grids.shape()[3] == c && t > 0 && c > 0,
+        "tensor `grids`: expected [E, T ≥ 1, C ≥ 1, C], found {:?}",
         grids.shape()
     );
     let floats = |name: &str, shape: &[Option<usize>]| -> anyhow::Result<Vec<f32>> {
@@ -247,7 +247,7 @@ fn read_shard(bytes: &[u8]) -> anyhow::Result<EpisodeSet> {
     })
 }
 
-/// The shard's tensor `name`, checked to hold `dtype` in `shape` (`None`: any length).
+/// The shard's tensor `name`, checked to hold `dtype` in `shape` (`None`: any length, `_` in errors).
 fn shard_tensor<'a>(
     shard: &'a SafeTensors,
     name: &str,
@@ -257,9 +257,11 @@ fn shard_tensor<'a>(
     let view = shard.tensor(name).with_context(|| format!("tensor `{name}`"))?;
     let fits = view.shape().len() == shape.len()
         && view.shape().iter().zip(shape).all(|(&n, want)| want.is_none_or(|w| w == n));
+    let want: Vec<String> = shape.iter().map(|d| d.map_or("_".into(), |n| n.to_string())).collect();
     anyhow::ensure!(
         view.dtype() == dtype && fits,
-        "tensor `{name}`: expected {dtype:?} {shape:?} (None: any length), found {:?} {:?}",
+        "tensor `{name}`: expected {dtype:?} [{}], found {:?} {:?}",
+        want.join(", "),
         view.dtype(),
         view.shape()
     );
@@ -293,7 +295,7 @@ mod tests {
         let read = read_shard(&shard(vec![1, 2, 3], 0.0)).unwrap();
         assert_eq!((read.episodes.len(), read.steps(), read.grid_cells), (1, 2, 2));
         let short = read_shard(&shard(vec![1, 1, 3], 0.0)).unwrap_err().to_string();
-        assert!(short.starts_with("tensor `poses`: expected F32 [Some(1), Some(2), Some(3)]"), "{short}");
+        assert_eq!(short, "tensor `poses`: expected F32 [1, 2, 3], found F32 [1, 1, 3]");
         let beyond = read_shard(&shard(vec![1, 2, 3], 1.0)).unwrap_err().to_string();
         assert!(
             beyond.starts_with("tensor `map`: episode 0's map 1, expected an index below the 1 names"),
