@@ -285,8 +285,11 @@ impl PfNetConfig {
             ));
         }
         LocalMapSpec::check_cell_m("local_map.cell_m", self.local_map.cell_m)?;
-        if self.joint_filters == 0 || self.layer_norm_eps <= 0.0 {
-            return Err("joint_filters, layer_norm_eps: expected ≥ 1 and > 0".into());
+        if self.joint_filters == 0 || !(self.layer_norm_eps > 0.0 && self.layer_norm_eps.is_finite()) {
+            return Err(format!(
+                "joint_filters, layer_norm_eps: expected ≥ 1 and a finite number > 0, found {} and {}",
+                self.joint_filters, self.layer_norm_eps
+            ));
         }
         Ok(())
     }
@@ -357,6 +360,15 @@ mod tests {
         }
         let absurd = PfNetConfig { joint_filters: usize::MAX, ..PfNetConfig::compact() };
         assert_eq!(absurd.kernel_weights(), u64::MAX, "saturates");
+    }
+
+    #[test]
+    fn a_nan_layer_norm_epsilon_is_refused_by_name() {
+        let nan = PfNetConfig { layer_norm_eps: f32::NAN, ..PfNetConfig::compact() };
+        assert_eq!(
+            nan.check().unwrap_err(),
+            "joint_filters, layer_norm_eps: expected ≥ 1 and a finite number > 0, found 8 and NaN"
+        );
     }
 
     #[test]
