@@ -4,7 +4,7 @@
 //! compact shape (mostly weights, so flips land in the data) and a tiny one (mostly header, so
 //! edits land in the shape and the tensor table).
 
-use super::targets::{Sample, repo_files, tempfile_dir, top_level_struct};
+use super::sample::{Sample, repo_files, tempfile_dir, top_level_struct};
 use crate::compose::read_ron;
 use crate::nn::checkpoint::{Checkpoint, Storage};
 use crate::nn::pfnet::{ConvBranch, LocalMapSpec, PfNet, PfNetConfig};

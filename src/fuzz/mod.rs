@@ -6,8 +6,10 @@
 mod learning_files;
 mod mutate;
 mod run;
+mod sample;
 mod targets;
 
 pub use mutate::{corpus_words, mutate};
 pub use run::{FuzzOptions, HANG_FACTOR, TargetReport, fuzz_target};
-pub use targets::{Sample, TARGETS, Target, target};
+pub use sample::Sample;
+pub use targets::{TARGETS, Target, target};

@@ -7,7 +7,8 @@
 //! are saved for reproduction.
 
 use crate::fuzz::mutate::{corpus_words, mutate};
-use crate::fuzz::targets::{Sample, Target, context, tempfile_dir};
+use crate::fuzz::sample::{Sample, tempfile_dir};
+use crate::fuzz::targets::{Target, context};
 use crate::world::rng::stream;
 use rand::Rng;
 use std::cell::{Cell, RefCell};

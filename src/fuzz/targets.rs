@@ -5,6 +5,7 @@ use super::learning_files::{
     collection_corpus, load_collection_of, load_pfnet, load_policy, load_train_pfnet, load_train_sac,
     pfnet_corpus, policy_corpus, train_config_corpus,
 };
+use super::sample::{Sample, repo_files, tempfile_dir, top_level_struct};
 use crate::cli::run::SceneArgs;
 use crate::compose::{Pipeline, standard_registry};
 use crate::eval::EvalConfig;
@@ -15,13 +16,6 @@ use crate::world::OccupancyMap;
 use crate::world::map::{load_ros_map, save_ros_map};
 use std::io;
 use std::path::Path;
-
-/// A set of files making up one input; the first is the one the loader opens, the others are
-/// what it refers to (a map YAML's image). Names are relative to the scratch folder.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Sample {
-    pub files: Vec<(String, Vec<u8>)>,
-}
 
 /// One parser under test.
 pub struct Target {
@@ -131,32 +125,6 @@ fn ron_corpus(root: &Path, folder: &str, kind: &str, extra: &[&str]) -> io::Resu
     Ok(samples)
 }
 
-/// `Scene` for a file starting (after `//` comments) with `Scene(`.
-pub(super) fn top_level_struct(text: &[u8]) -> Option<&str> {
-    let text = std::str::from_utf8(text).ok()?;
-    let code = text.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with("//"))?;
-    let name = &code[..code.find('(')?];
-    (!name.is_empty()).then_some(name)
-}
-
-/// `root/folder/*.ron`, sorted by name, as `("folder/name.ron", bytes)`.
-pub(super) fn repo_files(root: &Path, folder: &str) -> io::Result<Vec<(String, Vec<u8>)>> {
-    let dir = root.join(folder);
-    let mut names: Vec<String> = std::fs::read_dir(&dir)
-        .map_err(|e| {
-            io::Error::new(
-                e.kind(),
-                format!("{}: {e} (run from the repository root or pass --root)", dir.display()),
-            )
-        })?
-        .filter_map(Result::ok)
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|n| n.ends_with(".ron"))
-        .collect();
-    names.sort();
-    names.into_iter().map(|n| Ok((format!("{folder}/{n}"), std::fs::read(dir.join(&n))?))).collect()
-}
-
 /// The tiny test room as a ROS map `maps/<stem>.yaml` with a PGM or PNG image, as bytes.
 fn room_map(stem: &str, image: &str) -> io::Result<Vec<(String, Vec<u8>)>> {
     let dir = tempfile_dir()?;
@@ -247,17 +215,4 @@ fn room() -> OccupancyMap {
             .collect()
     };
     OccupancyMap::from_ascii(0.1, &(0..15).map(row).collect::<Vec<_>>().join("\n"))
-}
-
-/// A fresh folder under the system's temporary directory.
-pub fn tempfile_dir() -> io::Result<std::path::PathBuf> {
-    use std::sync::atomic::{AtomicU64, Ordering};
-    static NEXT: AtomicU64 = AtomicU64::new(0);
-    let dir = std::env::temp_dir().join(format!(
-        "apfn-fuzz-{}-{}",
-        std::process::id(),
-        NEXT.fetch_add(1, Ordering::Relaxed)
-    ));
-    std::fs::create_dir_all(&dir)?;
-    Ok(dir)
 }
