@@ -237,6 +237,12 @@ impl Checkpoint {
         Ok(Self { tensors, metadata, storage, source: Some(path.to_path_buf()) })
     }
 
+    /// Values in all the file's tensors: a loader refuses a configuration asking for more
+    /// before it allocates the network.
+    pub fn value_count(&self) -> u64 {
+        self.tensors.iter().map(|t| t.data.len() as u64).sum()
+    }
+
     /// The first tensor with this name.
     pub fn tensor(&self, name: &str) -> Option<&NamedTensor> {
         self.tensors.iter().find(|t| t.name == name)

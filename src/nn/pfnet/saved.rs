@@ -46,7 +46,7 @@ impl PfNet {
         let config: PfNetConfig =
             ron::from_str(text).map_err(|e| metadata(format!("a PfNetConfig (RON): {e}")))?;
         config.check().map_err(|e| metadata(format!("a valid PfNetConfig: {e}")))?;
-        let held: u64 = file.tensors.iter().map(|t| t.data.len() as u64).sum();
+        let held = file.value_count();
         if config.kernel_weights() > held {
             return Err(metadata(format!(
                 "a PfNetConfig of at most the {held} weights the file holds; its kernels alone need {}",

@@ -57,7 +57,7 @@ impl SacNetworks {
         let config: SacNetConfig = ron::from_str(text)
             .map_err(|e| metadata_error(file, CONFIG_KEY, format!("a SacNetConfig (RON): {e}")))?;
         config.check().map_err(|e| metadata_error(file, CONFIG_KEY, format!("a valid SacNetConfig: {e}")))?;
-        let held: u64 = file.tensors.iter().map(|t| t.data.len() as u64).sum();
+        let held = file.value_count();
         if config.weights() > held {
             let expected = format!(
                 "a SacNetConfig of at most the {held} weights the file holds; it needs {}",
