@@ -15,8 +15,9 @@ use crate::episode::{Episode, EpisodeStart, KidnapParams, StepError, episode_res
 use crate::params::{NoParams, StepData};
 use crate::particles::{
     BeamModelParams, InitParams, LikelihoodFieldParams, LikelihoodStats, ParticleSet, PfNetLikelihoodParams,
-    PoseEstimate, RecoveryParams, ResampleParams, TransitionParams, augmented_recovery, estimate,
-    init_particles, mcl_beam_model, mcl_likelihood_field, pfnet_likelihood, resample, transition,
+    PoseEstimate, RecoveryBeforeUpdateParams, RecoveryParams, ResampleParams, TransitionParams,
+    augmented_recovery, estimate, init_particles, mcl_beam_model, mcl_likelihood_field, pfnet_likelihood,
+    recovery_before_update, resample, transition,
 };
 use crate::replay::log_feed;
 use crate::sense::{
@@ -121,6 +122,16 @@ pub fn standard_registry() -> Registry {
             data![],
         ),
         transition,
+    )
+    .register::<RecoveryBeforeUpdateParams, _, _>(
+        spec(
+            "recovery_before_update",
+            Particles,
+            "Reads the last update's LikelihoodStats, the map's layers. Writes ParticleSet (uniform injections at prior weight, for the next update to weigh).",
+            data![ParticleSet],
+            data![],
+        ),
+        recovery_before_update,
     )
     .register::<LikelihoodFieldParams, _, _>(
         spec(

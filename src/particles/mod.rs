@@ -1,5 +1,6 @@
 //! ② Particles: the particle set and the filter steps, in the order a step runs them:
-//! init (draws the sets marked NeedsInit) → transition → likelihood_field, beam_model or pfnet → (augmented recovery) →
+//! init (draws the sets marked NeedsInit) → transition → (recovery before the update) → likelihood_field,
+//! beam_model or pfnet → (augmented recovery) →
 //! resample (fixed or KLD-adapted count) →
 //! estimate. Each step is a plain kernel over a `ParticleSet` plus a small system; weights are
 //! log-weights, Σ exp = 1.
@@ -30,7 +31,8 @@ pub use likelihood_field::{
 };
 pub use pfnet::{MapFeatures, PfNetLikelihoodParams, PfNetState, map_view, pfnet_likelihood, shared_model};
 pub use recovery::{
-    RecoveryParams, RecoveryState, augmented_recovery, inject_uniform, recover, update_averages,
+    RecoveryBeforeUpdateParams, RecoveryParams, RecoveryState, augmented_recovery, inject_uniform, recover,
+    recovery_before_update, update_averages,
 };
 pub use resample::{
     ResampleParams, resample, resample_kld, resample_soft, resample_with, should_resample, systematic_indices,

@@ -103,18 +103,16 @@ pub fn update_averages(state: &mut RecoveryState, mean_log_likelihood: f32, para
 }
 
 /// Replaces each particle with probability `probability` by a pose drawn uniformly over the
-/// traversable map, weighs the newcomers by `log_likelihood` (which adds log p(z | x) to the
-/// log-weights of the set it is given) as if each had held weight 1/N before the update whose
-/// log mean likelihood was `mean_log_likelihood`, and renormalises. Returns how many particles
-/// were replaced. Errors, leaving the set untouched, when there is no traversable cell or the
-/// likelihood fails.
-pub fn inject_uniform(
+/// traversable map, sets the newcomers' log-weights with `log_weights` (given them at 0, it writes
+/// each relative to the old set's normalised ones) and renormalises. Returns how many particles
+/// were replaced. Errors, leaving the set untouched, when there is no traversable cell or
+/// `log_weights` fails.
+fn replace_uniform(
     set: &mut ParticleSet,
     probability: f32,
-    mean_log_likelihood: f32,
     (map, traversable): (&OccupancyMap, &TraversableMap),
     rng: &mut impl Rng,
-    log_likelihood: impl FnOnce(&mut ParticleSet) -> Result<(), ParticleError>,
+    log_weights: impl FnOnce(&mut ParticleSet) -> Result<(), ParticleError>,
 ) -> Result<usize, ParticleError> {
     let n = set.len();
     if probability <= 0.0 || n == 0 {
@@ -127,39 +125,56 @@ pub fn inject_uniform(
     let poses: Vec<Pose2> = picks.iter().map(|_| traversable.sample_pose(map, rng)).collect();
     let mut fresh = ParticleSet::from_poses(&poses);
     fresh.log_w.fill(0.0);
-    log_likelihood(&mut fresh)?;
-    // Newcomer weight relative to the normalised old ones: (1/N)·p(z|x) / Σ_k w_k·p(z|x_k).
-    let reference = match mean_log_likelihood.is_finite() {
-        true => mean_log_likelihood,
-        false => fresh.log_total_weight(),
-    };
-    let log_n = (n as f32).ln();
+    log_weights(&mut fresh)?;
     for (k, &i) in picks.iter().enumerate() {
-        (set.x[i], set.y[i], set.yaw[i]) = (fresh.x[k], fresh.y[k], fresh.yaw[k]);
-        set.log_w[i] = fresh.log_w[k] - log_n - reference;
+        (set.x[i], set.y[i], set.yaw[i], set.log_w[i]) =
+            (fresh.x[k], fresh.y[k], fresh.yaw[k], fresh.log_w[k]);
     }
     set.normalise_guarded();
     Ok(picks.len())
 }
 
+/// Replaces each particle with probability `probability` by a pose drawn uniformly over the
+/// traversable map, weighs the newcomers by `log_likelihood` (which adds log p(z | x) to the
+/// log-weights of the set it is given) as if each had held weight 1/N before the update whose
+/// log mean likelihood was `mean_log_likelihood`, and renormalises. Returns how many particles
+/// were replaced. Errors, leaving the set untouched, when there is no traversable cell or the
+/// likelihood fails.
+pub fn inject_uniform(
+    set: &mut ParticleSet,
+    probability: f32,
+    mean_log_likelihood: f32,
+    layers: (&OccupancyMap, &TraversableMap),
+    rng: &mut impl Rng,
+    log_likelihood: impl FnOnce(&mut ParticleSet) -> Result<(), ParticleError>,
+) -> Result<usize, ParticleError> {
+    let log_n = (set.len() as f32).ln();
+    replace_uniform(set, probability, layers, rng, |fresh| {
+        log_likelihood(fresh)?;
+        // Newcomer weight relative to the normalised old ones: (1/N)·p(z|x) / Σ_k w_k·p(z|x_k).
+        let reference = match mean_log_likelihood.is_finite() {
+            true => mean_log_likelihood,
+            false => fresh.log_total_weight(),
+        };
+        fresh.log_w.iter_mut().for_each(|l| *l -= log_n + reference);
+        Ok(())
+    })
+}
+
 /// One robot's recovery step: folds in the last observation update (once; a stale `stats`
-/// changes nothing) and injects uniform particles with the resulting probability. Returns how
-/// many particles were replaced.
+/// changes nothing) and calls `inject` with the resulting per-particle probability. Returns how
+/// many particles it replaced.
 pub fn recover(
     state: &mut RecoveryState,
     stats: &LikelihoodStats,
     params: &RecoveryParams,
-    set: &mut ParticleSet,
-    layers: (&OccupancyMap, &TraversableMap),
-    rng: &mut impl Rng,
-    log_likelihood: impl FnOnce(&mut ParticleSet) -> Result<(), ParticleError>,
+    inject: impl FnOnce(f32) -> Result<usize, ParticleError>,
 ) -> Result<usize, ParticleError> {
     if stats.updates == state.seen_updates {
         return Ok(0);
     }
     state.seen_updates = stats.updates;
-    let p = update_averages(state, stats.mean_log_likelihood, params);
-    inject_uniform(set, p, stats.mean_log_likelihood, layers, rng, log_likelihood)
+    inject(update_averages(state, stats.mean_log_likelihood, params))
 }
 
 /// Reads LikelihoodStats (and its model), EpisodeStart, LidarScan, the map's OccupancyMap,
@@ -193,12 +208,73 @@ pub fn augmented_recovery(
             ObservationModel::BeamModel => add_log_beam_likelihoods(s, scan, rays, &beam_params),
             ObservationModel::PfNet => Err(ParticleError::InvalidParam {
                 field: "augmented_recovery",
-                expected: "a classical observation model before it (PF-net cannot weigh newcomers here yet)",
+                expected: "a classical observation model before it (with PF-net, `recovery_before_update`)",
             }),
         };
-        match recover(&mut next, stats, &params, &mut set, (map, traversable), &mut rng.0, weigh) {
+        let inject =
+            |p| inject_uniform(&mut set, p, stats.mean_log_likelihood, (map, traversable), &mut rng.0, weigh);
+        match recover(&mut next, stats, &params, inject) {
             Ok(count) => health.injected += count as u32,
             Err(e) => tracing::warn!("augmented_recovery: {e}"),
+        }
+        match state {
+            Some(mut state) => *state = next,
+            None => {
+                commands.entity(robot).insert(next);
+            }
+        }
+    }
+}
+
+/// The parameters of `recovery_before_update`: augmented MCL's rates, a resource of their own so
+/// that a schedule can hold both placements.
+#[derive(Resource, Serialize, Deserialize, Clone, Debug, Default, PartialEq)]
+#[serde(transparent)]
+pub struct RecoveryBeforeUpdateParams(pub RecoveryParams);
+
+impl StepParams for RecoveryBeforeUpdateParams {
+    fn check(&self) -> Result<(), String> {
+        self.0.check()
+    }
+}
+
+/// Augmented MCL's injection made before the observation update (inserted after `transition`)
+/// instead of after it: the averages through the last update set the probability and newcomers
+/// enter with the prior weight 1/N, so the update that follows weighs them with the rest under
+/// whatever model it runs — PF-net included, whose network `augmented_recovery` cannot call. The
+/// price is one step of lag: the injection answers the last scan, not the current one.
+///
+/// Reads LikelihoodStats (of the last update), EpisodeStart, the map's OccupancyMap and
+/// TraversableMap, RecoveryBeforeUpdateParams. Writes RecoveryState, ParticleSet, FilterRng,
+/// FilterHealth.injected.
+pub fn recovery_before_update(
+    params: Res<RecoveryBeforeUpdateParams>,
+    maps: Query<(&OccupancyMap, &TraversableMap)>,
+    mut commands: Commands,
+    mut robots: Query<(
+        Entity,
+        (&OnMap, &LikelihoodStats, Has<EpisodeStart>),
+        Option<&mut RecoveryState>,
+        (&mut ParticleSet, &mut FilterRng, &mut FilterHealth),
+    )>,
+) {
+    for (robot, (on_map, stats, start), state, (mut set, mut rng, mut health)) in &mut robots {
+        let Ok(layers) = maps.get(on_map.0) else { continue };
+        let mut next = state.as_deref().copied().unwrap_or_default();
+        if start {
+            // The last update belongs to the episode before: the averages restart at this one's first.
+            next = RecoveryState { seen_updates: stats.updates, ..RecoveryState::default() };
+        }
+        let log_prior = set.log_total_weight() - (set.len() as f32).ln();
+        let inject = |p| {
+            replace_uniform(&mut set, p, layers, &mut rng.0, |fresh| {
+                fresh.log_w.fill(log_prior);
+                Ok(())
+            })
+        };
+        match recover(&mut next, stats, &params.0, inject) {
+            Ok(count) => health.injected += count as u32,
+            Err(e) => tracing::warn!("recovery_before_update: {e}"),
         }
         match state {
             Some(mut state) => *state = next,
@@ -212,6 +288,7 @@ pub fn augmented_recovery(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::particles::mcl_likelihood_field;
     use crate::sense::{LidarParams, RayGrid, cast_scan};
     use crate::testing::tiny_room;
     use crate::world::rng::stream;
@@ -349,6 +426,66 @@ mod tests {
         world.run_system_once(augmented_recovery).expect("system runs");
         let state = world.get::<RecoveryState>(robot).expect("inserted on first run");
         assert_eq!(state.log_w, Some((-80.0, -80.0)));
+    }
+
+    #[test]
+    fn recovery_before_update_injects_at_prior_weight_for_the_next_update_to_weigh() {
+        let wrong = Pose2::new(1.6, 0.4, -2.0);
+        let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 2, ..Default::default() };
+        let state = RecoveryState { log_w: Some((-30.0, -33.0)), seen_updates: 1, ..Default::default() };
+        let (mut world, robot) = world_with_robot(wrong, stats, Some(state));
+        world.insert_resource(RecoveryBeforeUpdateParams::default());
+        world.run_system_once(recovery_before_update).expect("system runs");
+        let set = world.get::<ParticleSet>(robot).expect("set").clone();
+        let injected = world.get::<FilterHealth>(robot).expect("health").injected as usize;
+        assert_eq!(injected, moved(&set, wrong), "the counter matches the particles replaced");
+        assert!(
+            (175..=200).contains(&injected),
+            "the averages of the last update set p ≈ 0.91, got {injected}"
+        );
+        let uniform = -(200.0f32).ln();
+        assert!(
+            set.log_w.iter().all(|&l| (l - uniform).abs() < 1e-4),
+            "newcomers enter at 1/N, like the rest"
+        );
+        world.run_system_once(recovery_before_update).expect("a second run sees a stale update");
+        assert_eq!(
+            moved(world.get::<ParticleSet>(robot).expect("set"), wrong),
+            injected,
+            "one injection per update"
+        );
+
+        // The update that follows weighs the newcomers with the rest: the wrong particles lose the mass.
+        world.insert_resource(LikelihoodFieldParams::default());
+        world.run_system_once(mcl_likelihood_field).expect("system runs");
+        let set = world.get::<ParticleSet>(robot).expect("set");
+        let w = set.weights();
+        let old_mass: f32 = (0..set.len()).filter(|&k| set.pose(k) == wrong).map(|k| w[k]).sum();
+        assert!(old_mass < 0.01, "the wrong particles keep {old_mass} of the mass after the update");
+    }
+
+    #[test]
+    fn recovery_before_update_leaves_the_last_episode_behind_at_a_start() {
+        let at = Pose2::new(0.5, 1.0, 0.3);
+        let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 9, ..Default::default() };
+        let collapsed = RecoveryState { log_w: Some((-30.0, -60.0)), seen_updates: 8, ..Default::default() };
+        let (mut world, robot) = world_with_robot(at, stats, Some(collapsed));
+        world.insert_resource(RecoveryBeforeUpdateParams::default());
+        world.entity_mut(robot).insert(EpisodeStart);
+        world.run_system_once(recovery_before_update).expect("system runs");
+        let state = *world.get::<RecoveryState>(robot).expect("state");
+        assert_eq!(
+            state,
+            RecoveryState { seen_updates: 9, ..Default::default() },
+            "the last episode's update is not averaged"
+        );
+        assert_eq!(moved(world.get::<ParticleSet>(robot).expect("set"), at), 0, "no injection at a start");
+        world.entity_mut(robot).remove::<EpisodeStart>();
+        world.entity_mut(robot).insert(LikelihoodStats { mean_log_likelihood: -20.0, updates: 10, ..stats });
+        world.run_system_once(recovery_before_update).expect("system runs");
+        let state = world.get::<RecoveryState>(robot).expect("state");
+        assert_eq!(state.log_w, Some((-20.0, -20.0)), "the averages start at the episode's first update");
+        assert_eq!(moved(world.get::<ParticleSet>(robot).expect("set"), at), 0);
     }
 
     #[test]
