@@ -177,6 +177,21 @@ pub fn recover(
     inject(update_averages(state, stats.mean_log_likelihood, params))
 }
 
+/// Writes a robot's recovery state back, inserting it on the system's first run for the robot.
+fn keep_state(
+    commands: &mut Commands,
+    robot: Entity,
+    state: Option<Mut<RecoveryState>>,
+    next: RecoveryState,
+) {
+    match state {
+        Some(mut state) => *state = next,
+        None => {
+            commands.entity(robot).insert(next);
+        }
+    }
+}
+
 /// Reads LikelihoodStats (and its model), EpisodeStart, LidarScan, the map's OccupancyMap,
 /// TraversableMap and DistanceField or RayGrid, RecoveryParams, the model's params. Writes
 /// RecoveryState, ParticleSet, FilterRng, FilterHealth.injected.
@@ -217,12 +232,7 @@ pub fn augmented_recovery(
             Ok(count) => health.injected += count as u32,
             Err(e) => tracing::warn!("augmented_recovery: {e}"),
         }
-        match state {
-            Some(mut state) => *state = next,
-            None => {
-                commands.entity(robot).insert(next);
-            }
-        }
+        keep_state(&mut commands, robot, state, next);
     }
 }
 
@@ -276,12 +286,7 @@ pub fn recovery_before_update(
             Ok(count) => health.injected += count as u32,
             Err(e) => tracing::warn!("recovery_before_update: {e}"),
         }
-        match state {
-            Some(mut state) => *state = next,
-            None => {
-                commands.entity(robot).insert(next);
-            }
-        }
+        keep_state(&mut commands, robot, state, next);
     }
 }
 
