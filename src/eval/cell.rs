@@ -5,12 +5,12 @@ use crate::compose::{ComposeError, Pipeline};
 use crate::episode::{CompletedEpisodes, EpisodeRecord, summarize};
 use crate::eval::config::LoadedEval;
 use crate::eval::episodes::EpisodeRow;
+use crate::eval::row::ResultRow;
 use crate::eval::steps::StepRow;
 use crate::particles::{InitParams, ObservationModel, Task};
 use crate::plugin::{ApfnSet, headless_app};
 use crate::world::OccupancyMap;
 use bevy::prelude::Entity;
-use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
 /// Which schedule, task and map group a cell crosses (indices into the loaded config).
@@ -19,25 +19,6 @@ pub struct CellSpec {
     pub schedule: usize,
     pub task: Task,
     pub group: usize,
-}
-
-/// One row of results.json / results.csv: exactly the keys.
-#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
-pub struct ResultRow {
-    pub localizer: String,
-    pub policy: String,
-    pub task: Task,
-    pub split: String,
-    pub map: String,
-    pub particles: usize,
-    pub episodes: usize,
-    pub seed: u64,
-    pub mean_pos_err_m: f32,
-    pub rmse_pos_m: f32,
-    pub final_pos_err_m: f32,
-    pub mean_orient_err_rad: f32,
-    pub final_orient_err_rad: f32,
-    pub success_rate: f32,
 }
 
 /// Every cell of a config: schedules × tasks × map groups, in table order.

@@ -2,7 +2,7 @@
 //! pulled up by a few lost episodes can be told from a uniformly worse localizer.
 
 use crate::episode::{EpisodeRecord, succeeded};
-use crate::eval::cell::ResultRow;
+use crate::eval::row::ResultRow;
 use crate::particles::Task;
 use serde::Serialize;
 

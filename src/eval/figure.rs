@@ -5,8 +5,8 @@
 //! steps.
 
 use crate::episode::{CropSnapshot, EpisodeLog, EpisodeRecord, SUCCESS_RADIUS_M, succeeded};
-use crate::eval::cell::ResultRow;
 use crate::eval::font::register_sans_serif;
+use crate::eval::row::ResultRow;
 use crate::world::map::render;
 use crate::world::{OccupancyMap, Pose2};
 use image::{ImageFormat, Rgb, RgbImage, imageops};

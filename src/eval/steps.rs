@@ -3,7 +3,7 @@
 //! way to tell a policy that converges sooner from one that loses fewer episodes.
 
 use crate::episode::EpisodeRecord;
-use crate::eval::cell::ResultRow;
+use crate::eval::row::ResultRow;
 use crate::particles::Task;
 use serde::Serialize;
 

@@ -3,9 +3,9 @@
 //! (every episode behind every row), steps.csv (each row's error at every step) and paired.md
 //! (each policy against its cell's best other).
 
-use crate::eval::cell::ResultRow;
 use crate::eval::episodes::EpisodeRow;
 use crate::eval::paired::{paired_markdown, paired_rows};
+use crate::eval::row::ResultRow;
 use crate::eval::steps::StepRow;
 use crate::world::map::write_atomically;
 use anyhow::Context;

@@ -1,16 +1,9 @@
 //! The pose estimate: weighted mean position, circular weighted mean heading, and the weighted
 //! covariance of (x, y, yaw) with heading deviations wrapped.
 
-use crate::particles::set::ParticleSet;
+use crate::particles::set::{ParticleSet, PoseEstimate};
 use crate::world::{Pose2, circular_mean, wrap_angle};
 use bevy::prelude::*;
-
-/// The filter's point estimate and its spread. `cov` rows/columns are (x m, y m, yaw rad).
-#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
-pub struct PoseEstimate {
-    pub pose: Pose2,
-    pub cov: [[f32; 3]; 3],
-}
 
 /// Weighted mean and covariance of a set; `None` for an empty set. The heading is the circular
 /// mean (the reference used a linear mean, which breaks near ±π — DESIGN §5).

@@ -20,7 +20,7 @@ pub use beam_model::{
     BEAM_CHUNK, BeamModelParams, add_log_beam_likelihoods, beam_probability, beam_readings, mcl_beam_model,
     weigh_beam_model,
 };
-pub use estimate::{PoseEstimate, estimate, estimate_pose};
+pub use estimate::{estimate, estimate_pose};
 pub use init::{
     InitParams, Initialised, NeedsInit, StartGuess, Task, draw_around_guess, draw_initial_set, init_particles,
 };
@@ -39,6 +39,6 @@ pub use resample::{
 };
 pub use set::{
     Degenerate, FilterHealth, Guard, LikelihoodStats, ObservationModel, ParticleError, ParticleSet,
-    record_observation,
+    PoseEstimate, record_observation,
 };
 pub use transition::{TRANSITION_CHUNK, TransitionParams, propagate, transition};

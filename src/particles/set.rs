@@ -1,7 +1,7 @@
 //! The particle set: one component of contiguous arrays (x, y, yaw, log-weight), plus the
-//! counters of the filter's guard events and the errors of the particle stage.
+//! components it brings (the estimate, the counters of the filter's guard events, the last
+//! update's likelihood) and the errors of the particle stage.
 
-use crate::particles::estimate::PoseEstimate;
 use crate::world::Pose2;
 use bevy::prelude::Component;
 use thiserror::Error;
@@ -87,6 +87,13 @@ impl ParticleSet {
         let sum: f64 = finite().map(|l| ((l - max) as f64).exp()).sum();
         max + sum.ln() as f32
     }
+}
+
+/// The filter's point estimate and its spread. `cov` rows/columns are (x m, y m, yaw rad).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct PoseEstimate {
+    pub pose: Pose2,
+    pub cov: [[f32; 3]; 3],
 }
 
 /// Books the outcome of [`ParticleSet::weigh_with`] by `model` on the robot: a reset to uniform

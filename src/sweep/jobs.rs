@@ -3,11 +3,9 @@
 //! `random__tracking__seen__seed1`. Any engine that can run `apfn sweep FILE --job N` for N in
 //! 0..jobs runs the sweep (see docs/cluster.md).
 
-use crate::eval::{CellSpec, ResultRow, cell_steps, run_cell};
+use crate::eval::{CellSpec, cell_steps};
 use crate::sweep::config::LoadedSweep;
 use crate::sweep::error::SweepError;
-use crate::sweep::result::{JobResult, fingerprint};
-use std::time::Instant;
 
 /// One job: which cell of the eval config, with which seed, and the name its result is stored under.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -70,20 +68,6 @@ pub fn job_at(sweep: &LoadedSweep, jobs: &[Job], index: usize) -> Result<Job, Sw
 /// Agent steps a job runs (for progress bars).
 pub fn job_steps(sweep: &LoadedSweep, job: &Job) -> u64 {
     cell_steps(&sweep.eval, &job.cell)
-}
-
-/// Runs one job: its cell with its seed. `on_step` is called after every agent step.
-pub fn run_job(sweep: &LoadedSweep, job: &Job, on_step: impl Fn()) -> Result<JobResult, SweepError> {
-    let started = Instant::now();
-    let eval = sweep.seeded(job.seed);
-    let row: ResultRow = run_cell(&eval, &job.cell, on_step)?.row;
-    Ok(JobResult {
-        name: job.name.clone(),
-        schedule: job.schedule.clone(),
-        fingerprint: fingerprint(sweep, job)?,
-        wall_s: started.elapsed().as_secs_f64(),
-        row,
-    })
 }
 
 /// Keeps letters, digits, `-` and `.`; anything else (spaces, slashes, `__`) becomes `_`,

@@ -13,9 +13,9 @@ mod table;
 
 pub use config::{LoadedSweep, SweepConfig};
 pub use error::SweepError;
-pub use jobs::{Job, job_at, job_steps, jobs, list_lines, run_job};
+pub use jobs::{Job, job_at, job_steps, jobs, list_lines};
 pub use merge::{SweepRow, collect, merge};
 pub use proportion::Proportion;
-pub use result::{JobResult, JobStatus, job_path, job_status, write_job_result};
+pub use result::{JobResult, JobStatus, job_path, job_status, run_job, write_job_result};
 pub use stats::{MeanCi, mean_ci, t975};
 pub use table::{csv, markdown, write_sweep};

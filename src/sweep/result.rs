@@ -1,14 +1,15 @@
-//! One job's result file, `<out>/jobs/<name>.json`: the eval row, the wall-clock time, and a
+//! Running one job, and its result file, `<out>/jobs/<name>.json`: the eval row, the wall-clock time, and a
 //! fingerprint of everything the job depends on, so a rerun skips finished jobs but redoes
 //! those whose schedule file or eval settings changed since.
 
-use crate::eval::{MapGroup, ResultRow};
+use crate::eval::{MapGroup, ResultRow, run_cell};
 use crate::sweep::config::LoadedSweep;
 use crate::sweep::error::SweepError;
 use crate::sweep::jobs::Job;
 use crate::world::map::write_atomically;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -21,6 +22,20 @@ pub struct JobResult {
     /// Wall-clock seconds the job took.
     pub wall_s: f64,
     pub row: ResultRow,
+}
+
+/// Runs one job: its cell with its seed. `on_step` is called after every agent step.
+pub fn run_job(sweep: &LoadedSweep, job: &Job, on_step: impl Fn()) -> Result<JobResult, SweepError> {
+    let started = Instant::now();
+    let eval = sweep.seeded(job.seed);
+    let row = run_cell(&eval, &job.cell, on_step)?.row;
+    Ok(JobResult {
+        name: job.name.clone(),
+        schedule: job.schedule.clone(),
+        fingerprint: fingerprint(sweep, job)?,
+        wall_s: started.elapsed().as_secs_f64(),
+        row,
+    })
 }
 
 /// What a job's result file says about it.
