@@ -293,9 +293,12 @@ pub fn map_view(map: &NetworkMap) -> MapView<'_> {
 mod tests {
     use super::*;
     use crate::nn::pfnet::{MapInput, Observation, WideView, Workspace};
+    use crate::particles::{RecoveryBeforeUpdateParams, RecoveryState, recovery_before_update};
     use crate::sense::WideGrid;
     use crate::testing::tiny_room;
+    use crate::world::FilterRng;
     use crate::world::Pose2;
+    use crate::world::map::TraversableMap;
     use bevy::ecs::system::RunSystemOnce;
 
     const POSES: [Pose2; 3] =
@@ -378,6 +381,40 @@ mod tests {
         let (a, b) =
             (world.get::<ParticleSet>(robots[0]).unwrap(), world.get::<ParticleSet>(robots[1]).unwrap());
         assert_ne!(a.log_w, b.log_w, "different observations must give different weights");
+    }
+
+    #[test]
+    fn pfnet_likelihood_weighs_the_particles_recovery_injected_before_it() {
+        let (mut world, robots) = world_with_robots(&[grid(0)], MapFeatures::Exact);
+        let robot = robots[0];
+        let map = world.get::<OnMap>(robot).expect("on a map").0;
+        let room = tiny_room();
+        let traversable = TraversableMap::build(&room, 0.1).expect("room has space");
+        world.entity_mut(map).insert((room, traversable));
+        world.insert_resource(RecoveryBeforeUpdateParams::default());
+        // The scans have fit worse than the belief's average for a while: about half are replaced.
+        let last = LikelihoodStats { mean_log_likelihood: -80.0, updates: 2, ..Default::default() };
+        let state = RecoveryState { log_w: Some((-30.0, -30.7)), seen_updates: 1, ..Default::default() };
+        world.entity_mut(robot).insert((last, state, FilterRng::seeded(5)));
+        world.run_system_once(recovery_before_update).expect("system runs");
+        world.run_system_once(pfnet_likelihood).expect("system runs");
+        let set = world.get::<ParticleSet>(robot).expect("set").clone();
+        let moved = (0..set.len()).filter(|&k| set.pose(k) != POSES[k]).count();
+        assert!((1..set.len()).contains(&moved), "some particles replaced and some kept, got {moved}");
+
+        // The same poses weighed from a uniform set by the network alone.
+        let (mut alone, robots) = world_with_robots(&[grid(0)], MapFeatures::Exact);
+        let poses: Vec<Pose2> = (0..set.len()).map(|k| set.pose(k)).collect();
+        alone.entity_mut(robots[0]).insert(ParticleSet::from_poses(&poses));
+        alone.run_system_once(pfnet_likelihood).expect("system runs");
+        let want = alone.get::<ParticleSet>(robots[0]).expect("set").weights();
+        for (w, e) in set.weights().iter().zip(&want) {
+            assert!(
+                (w - e).abs() < 1e-5,
+                "newcomers weighed like the rest: {:?} against {want:?}",
+                set.weights()
+            );
+        }
     }
 
     #[test]
