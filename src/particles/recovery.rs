@@ -14,6 +14,9 @@
 //! - The averages live in log space (a 60-beam likelihood is ≈ e⁻³⁰ or less and underflows f32).
 //! - They start at the first update of each episode (nav2 does the same when they are 0) and are
 //!   not reset after an injection (nav2 resets them, which caps injections at one step in two).
+//!
+//! `recovery_before_update` makes the same injection before the update instead, with the prior
+//! weight 1/N, for a model that only its own step can evaluate (PF-net's network).
 
 use crate::episode::EpisodeStart;
 use crate::params::{StepParams, expect_param};
@@ -236,8 +239,9 @@ pub fn augmented_recovery(
     }
 }
 
-/// The parameters of `recovery_before_update`: augmented MCL's rates, a resource of their own so
-/// that a schedule can hold both placements.
+/// The parameters of `recovery_before_update`: augmented MCL's rates, as a type of their own
+/// because a step's parameters are a resource keyed by type. The two placements share
+/// `RecoveryState`, so a schedule runs one of them.
 #[derive(Resource, Serialize, Deserialize, Clone, Debug, Default, PartialEq)]
 #[serde(transparent)]
 pub struct RecoveryBeforeUpdateParams(pub RecoveryParams);
