@@ -304,6 +304,8 @@ mod tests {
     use bevy::ecs::system::RunSystemOnce;
 
     const TRUTH: Pose2 = Pose2 { x: 0.5, y: 1.0, yaw: 0.3 };
+    /// Where the collapsed beliefs of the tests sit, far from `TRUTH`.
+    const WRONG: Pose2 = Pose2 { x: 1.6, y: 0.4, yaw: -2.0 };
 
     /// tiny_room with its layers, and a robot at `TRUTH` whose 200 particles sit at `particles`.
     fn world_with_robot(
@@ -317,6 +319,7 @@ mod tests {
         let layers = (TraversableMap::build(&map, 0.1).expect("room has space"), DistanceField::build(&map));
         let mut world = World::new();
         world.insert_resource(RecoveryParams::default());
+        world.insert_resource(RecoveryBeforeUpdateParams::default());
         let rays = RayGrid::from_map(&map);
         let m = world.spawn((map, layers.0, layers.1, rays)).id();
         let set = ParticleSet::from_poses(&[particles; 200]);
@@ -334,24 +337,23 @@ mod tests {
 
     #[test]
     fn augmented_recovery_injects_when_the_likelihood_collapses() {
-        let wrong = Pose2::new(1.6, 0.4, -2.0);
         let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 2, ..Default::default() };
         // w_fast already e³ below w_slow, and the new scan fits far worse still.
         let state = RecoveryState { log_w: Some((-30.0, -33.0)), seen_updates: 1, ..Default::default() };
-        let (mut world, robot) = world_with_robot(wrong, stats, Some(state));
+        let (mut world, robot) = world_with_robot(WRONG, stats, Some(state));
         world.run_system_once(augmented_recovery).expect("system runs");
         let p = world.get::<RecoveryState>(robot).expect("state").injection_probability;
         let expected = 1.0 - (0.9 * (-3.0f32).exp()) / 0.999;
         assert!((p - expected).abs() < 1e-3, "p = 1 − w_fast/w_slow = {expected}, got {p}");
         let set = world.get::<ParticleSet>(robot).expect("set");
         let injected = world.get::<FilterHealth>(robot).expect("health").injected as usize;
-        assert_eq!(injected, moved(set, wrong), "the counter matches the particles replaced");
+        assert_eq!(injected, moved(set, WRONG), "the counter matches the particles replaced");
         assert!((175..=200).contains(&injected), "≈ 200·{p:.3} = {:.0} injected, got {injected}", 200.0 * p);
         assert!((set.weights().iter().sum::<f32>() - 1.0).abs() < 1e-4, "weights stay normalised");
         let map = tiny_room();
         let t = TraversableMap::build(&map, 0.1).expect("room");
         let on_map = (0..set.len())
-            .filter(|&k| set.pose(k) != wrong)
+            .filter(|&k| set.pose(k) != WRONG)
             .all(|k| map.cell_at(set.x[k], set.y[k]).is_some_and(|(i, j)| t.is_traversable(i, j)));
         assert!(on_map, "injected particles lie on traversable cells");
     }
@@ -361,7 +363,6 @@ mod tests {
         // Every old particle is wrong and the scan says so: the newcomers, weighed by the current
         // scan with the model that weighed the set, must carry the weight, each in proportion to
         // its likelihood under that model.
-        let wrong = Pose2::new(1.6, 0.4, -2.0);
         let (field, rays) = (DistanceField::build(&tiny_room()), RayGrid::from_map(&tiny_room()));
         let mut scan = LidarScan::default();
         cast_scan(&rays, TRUTH, &[], &LidarParams::default(), &mut scan);
@@ -383,15 +384,15 @@ mod tests {
                 probe.log_w
             };
             let stats =
-                LikelihoodStats { mean_log_likelihood: log_likelihoods(&[wrong])[0], updates: 2, model };
+                LikelihoodStats { mean_log_likelihood: log_likelihoods(&[WRONG])[0], updates: 2, model };
             let state = RecoveryState { log_w: Some((-30.0, -33.0)), seen_updates: 1, ..Default::default() };
-            let (mut world, robot) = world_with_robot(wrong, stats, Some(state));
+            let (mut world, robot) = world_with_robot(WRONG, stats, Some(state));
             world.run_system_once(augmented_recovery).expect("system runs");
             let set = world.get::<ParticleSet>(robot).expect("set");
             let w = set.weights();
-            let old_mass: f32 = (0..set.len()).filter(|&k| set.pose(k) == wrong).map(|k| w[k]).sum();
+            let old_mass: f32 = (0..set.len()).filter(|&k| set.pose(k) == WRONG).map(|k| w[k]).sum();
             assert!(old_mass < 0.01, "{model:?}: the wrong particles keep {old_mass} of the mass");
-            let newcomers: Vec<usize> = (0..set.len()).filter(|&k| set.pose(k) != wrong).collect();
+            let newcomers: Vec<usize> = (0..set.len()).filter(|&k| set.pose(k) != WRONG).collect();
             let poses: Vec<Pose2> = newcomers.iter().map(|&k| set.pose(k)).collect();
             let offsets: Vec<f32> =
                 newcomers.iter().zip(log_likelihoods(&poses)).map(|(&k, l)| set.log_w[k] - l).collect();
@@ -439,15 +440,13 @@ mod tests {
 
     #[test]
     fn recovery_before_update_injects_at_prior_weight_for_the_next_update_to_weigh() {
-        let wrong = Pose2::new(1.6, 0.4, -2.0);
         let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 2, ..Default::default() };
         let state = RecoveryState { log_w: Some((-30.0, -33.0)), seen_updates: 1, ..Default::default() };
-        let (mut world, robot) = world_with_robot(wrong, stats, Some(state));
-        world.insert_resource(RecoveryBeforeUpdateParams::default());
+        let (mut world, robot) = world_with_robot(WRONG, stats, Some(state));
         world.run_system_once(recovery_before_update).expect("system runs");
         let set = world.get::<ParticleSet>(robot).expect("set").clone();
         let injected = world.get::<FilterHealth>(robot).expect("health").injected as usize;
-        assert_eq!(injected, moved(&set, wrong), "the counter matches the particles replaced");
+        assert_eq!(injected, moved(&set, WRONG), "the counter matches the particles replaced");
         assert!(
             (175..=200).contains(&injected),
             "the averages of the last update set p ≈ 0.91, got {injected}"
@@ -459,7 +458,7 @@ mod tests {
         );
         world.run_system_once(recovery_before_update).expect("a second run sees a stale update");
         assert_eq!(
-            moved(world.get::<ParticleSet>(robot).expect("set"), wrong),
+            moved(world.get::<ParticleSet>(robot).expect("set"), WRONG),
             injected,
             "one injection per update"
         );
@@ -469,7 +468,7 @@ mod tests {
         world.run_system_once(mcl_likelihood_field).expect("system runs");
         let set = world.get::<ParticleSet>(robot).expect("set");
         let w = set.weights();
-        let old_mass: f32 = (0..set.len()).filter(|&k| set.pose(k) == wrong).map(|k| w[k]).sum();
+        let old_mass: f32 = (0..set.len()).filter(|&k| set.pose(k) == WRONG).map(|k| w[k]).sum();
         assert!(old_mass < 0.01, "the wrong particles keep {old_mass} of the mass after the update");
     }
 
@@ -479,7 +478,6 @@ mod tests {
         let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 9, ..Default::default() };
         let collapsed = RecoveryState { log_w: Some((-30.0, -60.0)), seen_updates: 8, ..Default::default() };
         let (mut world, robot) = world_with_robot(at, stats, Some(collapsed));
-        world.insert_resource(RecoveryBeforeUpdateParams::default());
         world.entity_mut(robot).insert(EpisodeStart);
         world.run_system_once(recovery_before_update).expect("system runs");
         let state = *world.get::<RecoveryState>(robot).expect("state");
