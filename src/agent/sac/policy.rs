@@ -1,7 +1,8 @@
 //! `sac_policy`: one batched actor forward pass for every robot in the world. With a learning
 //! agent in the world it samples actions (uniformly at random while warming up) and stores each
 //! robot's transitions; otherwise it acts with a policy checkpoint, deterministically, tanh(μ),
-//! or, with `sample`, by drawing from the policy as training does.
+//! or, with `sample`, by drawing from the policy as training does, or, with `candidates`, by the
+//! checkpoint's critics' choice among tanh(μ) and actions drawn from the policy.
 
 use crate::act::Collided;
 use crate::agent::Action;
@@ -24,7 +25,7 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::{Arc, Mutex, OnceLock};
 
-#[derive(Resource, Serialize, Deserialize, Clone, Debug, Default, PartialEq)]
+#[derive(Resource, Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct SacPolicyParams {
     /// A policy written by `apfn train-sac` (safetensors), relative to the working directory.
@@ -36,12 +37,35 @@ pub struct SacPolicyParams {
     /// drawn actions can break such loops (Singh, Jaakkola & Jordan 1994); for the shipped
     /// global agent they did not help (docs/results/sac_sampled/).
     pub sample: bool,
+    /// Actions weighed per step (default 1, tanh(μ) alone): with k > 1, tanh(μ) and k − 1 actions
+    /// drawn from the policy with the robot's scenario RNG, of which the checkpoint's twin
+    /// critics choose the one with the highest min(Q₁, Q₂) — a one-step policy improvement at
+    /// test time, using the critics training leaves beside the actor.
+    pub candidates: usize,
 }
+
+impl Default for SacPolicyParams {
+    fn default() -> Self {
+        Self { checkpoint: None, sample: false, candidates: 1 }
+    }
+}
+
+/// More candidates than this cost more than the rest of a step and are surely a typo.
+const MAX_CANDIDATES: usize = 1024;
 
 impl StepParams for SacPolicyParams {
     /// Loads the policy once per process, so a missing or broken file fails when the schedule
     /// loads, naming it.
     fn check(&self) -> Result<(), String> {
+        if !(1..=MAX_CANDIDATES).contains(&self.candidates) {
+            return Err(format!(
+                "candidates: expected 1 (tanh(μ) alone) to {MAX_CANDIDATES} actions per step, got {}",
+                self.candidates
+            ));
+        }
+        if self.sample && self.candidates > 1 {
+            return Err("sample and candidates > 1 both choose the action: set one of them".into());
+        }
         match &self.checkpoint {
             Some(path) => shared_policy(path).map(|_| ()),
             None => Ok(()),
@@ -121,12 +145,13 @@ pub struct PolicyState {
     warned: bool,
 }
 
-/// Fills `noise` with the standard normals of each of `order`'s robots, from its ScenarioRng.
-/// Zero noise is tanh(μ): a robot spawned without a ScenarioRng acts deterministically, with one
-/// warning (`warned`).
+/// Fills `noise` with `draws` actions' standard normals for each of `order`'s robots, from its
+/// ScenarioRng. Zero noise is tanh(μ): a robot spawned without a ScenarioRng acts
+/// deterministically, with one warning (`warned`).
 fn draw_action_noise(
     robots: &mut Query<RobotView>,
     order: &[Entity],
+    draws: usize,
     noise: &mut Vec<f32>,
     warned: &mut bool,
 ) {
@@ -135,14 +160,14 @@ fn draw_action_noise(
         let Some(mut rng) = robots.get_mut(robot).expect("listed above").9 else {
             if !*warned {
                 tracing::warn!(
-                    "sac_policy: sample needs each robot's ScenarioRng; {robot:?} has none and acts by tanh(μ)"
+                    "sac_policy: drawn actions need each robot's ScenarioRng; {robot:?} has none and acts by tanh(μ)"
                 );
                 *warned = true;
             }
-            noise.extend([0.0; ACTION_LEN]);
+            noise.extend(std::iter::repeat_n(0.0, draws * ACTION_LEN));
             continue;
         };
-        noise.extend((0..ACTION_LEN).map(|_| rng.0.sample::<f32, _>(StandardNormal)));
+        noise.extend((0..draws * ACTION_LEN).map(|_| rng.0.sample::<f32, _>(StandardNormal)));
     }
 }
 
@@ -234,11 +259,17 @@ pub fn sac_policy(
             agent.learner.nets.act(&obs, Some(&state.noise), &mut state.ws, &mut state.actions);
         }
         None => {
-            if params.sample {
-                draw_action_noise(&mut robots, &state.robots, &mut state.noise, &mut state.warned);
+            let policy = state.loaded.as_ref().expect("loaded above");
+            let draws = if params.sample { 1 } else { params.candidates - 1 };
+            if draws > 0 {
+                draw_action_noise(&mut robots, &state.robots, draws, &mut state.noise, &mut state.warned);
             }
-            let noise = params.sample.then_some(&state.noise[..]);
-            state.loaded.as_ref().expect("loaded above").act(&obs, noise, &mut state.ws, &mut state.actions)
+            if params.candidates > 1 {
+                policy.act_by_critics(&obs, &state.noise, &mut state.ws, &mut state.actions)
+            } else {
+                let noise = params.sample.then_some(&state.noise[..]);
+                policy.act(&obs, noise, &mut state.ws, &mut state.actions)
+            }
         }
     }
     for (k, &robot) in state.robots.iter().enumerate() {
@@ -354,12 +385,12 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("policy.safetensors");
         nets.save(&path).unwrap();
-        let params = SacPolicyParams { checkpoint: Some(path.display().to_string()), sample: false };
+        let params = SacPolicyParams { checkpoint: Some(path.display().to_string()), ..Default::default() };
         assert_eq!(params.check(), Ok(()));
         // `seed: None` spawns the robot without a ScenarioRng.
-        let run = |sample: bool, seed: Option<u64>| {
+        let run_with = |params: SacPolicyParams, seed: Option<u64>| {
             let mut world = World::new();
-            world.insert_resource(SacPolicyParams { sample, ..params.clone() });
+            world.insert_resource(params);
             world.insert_resource(EpisodeParams::default());
             let crop = BeliefCrop {
                 cells: 5,
@@ -374,6 +405,8 @@ mod tests {
             world.run_system_once(sac_policy).unwrap();
             *world.get::<Action>(robot).unwrap()
         };
+        let run =
+            |sample: bool, seed: Option<u64>| run_with(SacPolicyParams { sample, ..params.clone() }, seed);
         assert_eq!(run(false, Some(1)), run(false, Some(2)), "evaluation actions are tanh(μ), no noise");
         let drawn = run(true, Some(1));
         assert_eq!(drawn, run(true, Some(1)), "a drawn action is the robot's RNG's");
@@ -381,9 +414,22 @@ mod tests {
         assert_ne!(drawn, run(false, Some(1)), "a draw is not the mean action");
         assert!(drawn.linear.abs() <= 1.0 && drawn.angular.abs() <= 1.0, "drawn actions stay in [−1, 1]");
         assert_eq!(run(true, None), run(false, Some(1)), "no ScenarioRng: tanh(μ), no panic");
+        let chosen = |seed: Option<u64>| run_with(SacPolicyParams { candidates: 16, ..params.clone() }, seed);
+        assert_eq!(chosen(Some(1)), chosen(Some(1)), "the critics' choice among the robot RNG's draws");
+        assert_eq!(chosen(None), run(false, Some(1)), "no ScenarioRng: tanh(μ) is the only candidate");
         let missing =
-            SacPolicyParams { checkpoint: Some("no/such/policy.safetensors".into()), sample: false };
+            SacPolicyParams { checkpoint: Some("no/such/policy.safetensors".into()), ..Default::default() };
         assert!(missing.check().unwrap_err().contains("no/such/policy.safetensors"));
+    }
+
+    #[test]
+    fn candidates_are_checked() {
+        let with = |candidates, sample| SacPolicyParams { candidates, sample, ..Default::default() }.check();
+        assert_eq!(with(1, true), Ok(()));
+        assert_eq!(with(32, false), Ok(()));
+        assert!(with(0, false).unwrap_err().starts_with("candidates: expected 1"));
+        assert!(with(1_000_000, false).unwrap_err().contains("got 1000000"));
+        assert!(with(8, true).unwrap_err().contains("set one of them"));
     }
 
     #[test]
@@ -395,8 +441,10 @@ mod tests {
             .unwrap();
         let mut world = World::new();
         assert_eq!(check_policy_inputs(&world), Ok(()), "no checkpoint, nothing to check");
-        world
-            .insert_resource(SacPolicyParams { checkpoint: Some(path.display().to_string()), sample: false });
+        world.insert_resource(SacPolicyParams {
+            checkpoint: Some(path.display().to_string()),
+            ..Default::default()
+        });
         world.insert_resource(BeliefParams { cells: 5, history: 1, ..Default::default() });
         world.insert_resource(LocalGridParams { out_cells: 5, ..Default::default() });
         world.insert_resource(DepthParams { columns: 3, ..Default::default() });

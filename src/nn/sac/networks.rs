@@ -62,6 +62,9 @@ pub struct PolicyWorkspace {
     features: Vec<f32>,
     actor: MlpActivations,
     log_prob: Vec<f32>,
+    candidates: Vec<f32>,
+    critic_input: Vec<f32>,
+    critics: [MlpActivations; 2],
 }
 
 impl SacNetworks {
@@ -203,6 +206,56 @@ impl SacNetworks {
             }
         }
     }
+
+    /// Actions `[n][2]` chosen by the twin critics: of tanh(μ) and the actions drawn with `noise`
+    /// (`[n][draws][2]`), the one with the highest min(Q₁, Q₂), the value SAC's actor is trained
+    /// to raise; ties go to the earlier candidate, so tanh(μ) first.
+    pub fn act_by_critics(
+        &self,
+        obs: &Observations,
+        noise: &[f32],
+        ws: &mut PolicyWorkspace,
+        actions: &mut [f32],
+    ) {
+        let n = obs.n;
+        if n == 0 {
+            return;
+        }
+        assert_eq!(noise.len() % (n * ACTION_LEN), 0, "noise: [n][draws][2]");
+        let draws = noise.len() / (n * ACTION_LEN);
+        let candidates = 1 + draws;
+        self.policy_heads(obs, ws);
+        let PolicyWorkspace { features, actor, candidates: cand, critic_input, critics, .. } = ws;
+        let f = self.feature_len();
+        cand.resize(n * candidates * ACTION_LEN, 0.0);
+        for (k, head) in actor.output().chunks_exact(HEAD_LEN).enumerate() {
+            let out = &mut cand[k * candidates * ACTION_LEN..(k + 1) * candidates * ACTION_LEN];
+            let (mean, drawn) = out.split_at_mut(ACTION_LEN);
+            tanh_gaussian::mean_action(head, mean);
+            let noise = &noise[k * draws * ACTION_LEN..(k + 1) * draws * ACTION_LEN];
+            for (a, e) in drawn.chunks_exact_mut(ACTION_LEN).zip(noise.chunks_exact(ACTION_LEN)) {
+                tanh_gaussian::sample(head, e, a, &mut [0.0]);
+            }
+        }
+        critic_input.clear();
+        for (row, out) in features.chunks_exact(f).zip(cand.chunks_exact(candidates * ACTION_LEN)) {
+            for a in out.chunks_exact(ACTION_LEN) {
+                critic_input.extend_from_slice(row);
+                critic_input.extend_from_slice(a);
+            }
+        }
+        for (critic, acts) in self.critics.iter().zip(critics.iter_mut()) {
+            critic.forward(&self.params.values, critic_input, n * candidates, acts);
+        }
+        let [q1, q2] = [critics[0].output(), critics[1].output()];
+        assert_eq!(actions.len(), n * ACTION_LEN, "actions: [n][2]");
+        for (k, chosen) in actions.chunks_exact_mut(ACTION_LEN).enumerate() {
+            let value = |c: usize| q1[k * candidates + c].min(q2[k * candidates + c]);
+            let best = (1..candidates).fold(0, |best, c| if value(c) > value(best) { c } else { best });
+            let at = (k * candidates + best) * ACTION_LEN;
+            chosen.copy_from_slice(&cand[at..at + ACTION_LEN]);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -248,5 +301,66 @@ mod tests {
             );
         }
         assert!(all.iter().any(|&v| v != 0.0), "features must not all be zero");
+    }
+
+    #[test]
+    fn the_critics_choose_the_candidate_with_the_highest_lower_q() {
+        let config = SacNetConfig {
+            conv_channels: vec![2],
+            encoder_fc: 4,
+            mlp_width: 8,
+            belief_cells: 5,
+            belief_channels: 4,
+            grid_cells: 5,
+            depth_columns: 0,
+        };
+        let nets = SacNetworks::new(&config, 5);
+        let (n, draws) = (3, 6);
+        let belief: Vec<f32> = test_values(n * 100, 6).iter().map(|v| v.abs()).collect();
+        let grid: Vec<f32> = test_values(n * 25, 7).iter().map(|v| v.abs()).collect();
+        let state = test_values(n * config.state_len(), 8);
+        let obs = Observations { n, belief: &belief, grid: &grid, state: &state };
+        let noise: Vec<f32> = test_values(n * draws * ACTION_LEN, 9).iter().map(|v| 3.0 * v).collect();
+        let mut ws = PolicyWorkspace::default();
+        let (mut chosen, mut mean) = (vec![0.0; n * ACTION_LEN], vec![0.0; n * ACTION_LEN]);
+        nets.act(&obs, None, &mut ws, &mut mean);
+        nets.act_by_critics(&obs, &[], &mut ws, &mut chosen);
+        assert_eq!(chosen, mean, "no draws: tanh(μ)");
+        nets.act_by_critics(&obs, &noise, &mut ws, &mut chosen);
+
+        // Each candidate on its own: its action from `act`, its value from one critic row each.
+        let mut features = Vec::new();
+        nets.encode(&nets.params.values, &obs, &mut FeatureWorkspace::default(), &mut features);
+        let f = nets.feature_len();
+        let lower_q = |k: usize, a: &[f32]| {
+            let input = [&features[k * f..(k + 1) * f], a].concat();
+            let q = nets.critics.each_ref().map(|critic| {
+                let mut acts = MlpActivations::default();
+                critic.forward(&nets.params.values, &input, 1, &mut acts);
+                acts.output()[0]
+            });
+            q[0].min(q[1])
+        };
+        let mut picked_a_draw = false;
+        for k in 0..n {
+            let mut candidates = vec![mean[k * ACTION_LEN..(k + 1) * ACTION_LEN].to_vec()];
+            for j in 0..draws {
+                let e: Vec<f32> = (0..n)
+                    .flat_map(|r| {
+                        let at = (r * draws + j) * ACTION_LEN;
+                        noise[at..at + ACTION_LEN].to_vec()
+                    })
+                    .collect();
+                let mut drawn = vec![0.0; n * ACTION_LEN];
+                nets.act(&obs, Some(&e), &mut PolicyWorkspace::default(), &mut drawn);
+                candidates.push(drawn[k * ACTION_LEN..(k + 1) * ACTION_LEN].to_vec());
+            }
+            let values: Vec<f32> = candidates.iter().map(|a| lower_q(k, a)).collect();
+            let best = (0..values.len()).fold(0, |b, c| if values[c] > values[b] { c } else { b });
+            let got = &chosen[k * ACTION_LEN..(k + 1) * ACTION_LEN];
+            assert_eq!(got, &candidates[best][..], "robot {k}: values {values:?}");
+            picked_a_draw |= best > 0;
+        }
+        assert!(picked_a_draw, "some draw must beat tanh(μ), or the test shows nothing");
     }
 }
