@@ -13,7 +13,7 @@ use crate::agent::sac::observation::{
 use crate::agent::sac::reward::Reward;
 use crate::belief::{BELIEF_CHANNELS, BeliefCrop, BeliefParams};
 use crate::episode::{Episode, EpisodeEnd, EpisodeParams};
-use crate::nn::sac::{ACTION_LEN, Observations, PolicyWorkspace, STATE_LEN, SacNetworks};
+use crate::nn::sac::{ACTION_LEN, Candidates, Observations, PolicyWorkspace, STATE_LEN, SacNetworks};
 use crate::params::StepParams;
 use crate::sense::{DepthParams, DepthStrip, LocalGrid, LocalGridParams};
 use crate::world::{RobotId, ScenarioRng, in_id_order};
@@ -38,15 +38,27 @@ pub struct SacPolicyParams {
     /// global agent they did not help (docs/results/sac_sampled/).
     pub sample: bool,
     /// Actions weighed per step (default 1, tanh(μ) alone): with k > 1, tanh(μ) and k − 1 actions
-    /// drawn from the policy with the robot's scenario RNG, of which the checkpoint's twin
-    /// critics choose the one with the highest min(Q₁, Q₂) — a one-step policy improvement at
-    /// test time, using the critics training leaves beside the actor.
+    /// drawn with the robot's scenario RNG, of which the checkpoint's twin critics choose the
+    /// one with the highest min(Q₁, Q₂) — a one-step policy improvement at test time, using the
+    /// critics training leaves beside the actor.
     pub candidates: usize,
+    /// Where the k − 1 candidates come from (default the policy).
+    pub candidates_from: CandidateSource,
+}
+
+/// Where `sac_policy`'s candidates beside tanh(μ) are drawn from.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum CandidateSource {
+    /// The tanh-Gaussian policy: actions near what the actor would do.
+    #[default]
+    Policy,
+    /// Uniformly over [−1, 1]²: every motion the robot has, as the critics' warm-up data held.
+    Uniform,
 }
 
 impl Default for SacPolicyParams {
     fn default() -> Self {
-        Self { checkpoint: None, sample: false, candidates: 1 }
+        Self { checkpoint: None, sample: false, candidates: 1, candidates_from: CandidateSource::Policy }
     }
 }
 
@@ -145,13 +157,14 @@ pub struct PolicyState {
     warned: bool,
 }
 
-/// Fills `noise` with `draws` actions' standard normals for each of `order`'s robots, from its
-/// ScenarioRng. Zero noise is tanh(μ): a robot spawned without a ScenarioRng acts
+/// Fills `noise` with `draws` actions' random numbers for each of `order`'s robots, from its
+/// ScenarioRng: standard normals, or with `uniform` actions in [−1, 1]. A robot spawned without
+/// a ScenarioRng gets zeros (tanh(μ), or standing still among uniform candidates) and acts
 /// deterministically, with one warning (`warned`).
 fn draw_action_noise(
     robots: &mut Query<RobotView>,
     order: &[Entity],
-    draws: usize,
+    (draws, uniform): (usize, bool),
     noise: &mut Vec<f32>,
     warned: &mut bool,
 ) {
@@ -160,14 +173,18 @@ fn draw_action_noise(
         let Some(mut rng) = robots.get_mut(robot).expect("listed above").9 else {
             if !*warned {
                 tracing::warn!(
-                    "sac_policy: drawn actions need each robot's ScenarioRng; {robot:?} has none and acts by tanh(μ)"
+                    "sac_policy: drawn actions need each robot's ScenarioRng; {robot:?} has none: zeros instead"
                 );
                 *warned = true;
             }
             noise.extend(std::iter::repeat_n(0.0, draws * ACTION_LEN));
             continue;
         };
-        noise.extend((0..draws * ACTION_LEN).map(|_| rng.0.sample::<f32, _>(StandardNormal)));
+        let rng = &mut rng.0;
+        noise.extend((0..draws * ACTION_LEN).map(|_| match uniform {
+            true => rng.random_range(-1.0..=1.0),
+            false => rng.sample::<f32, _>(StandardNormal),
+        }));
     }
 }
 
@@ -261,11 +278,17 @@ pub fn sac_policy(
         None => {
             let policy = state.loaded.as_ref().expect("loaded above");
             let draws = if params.sample { 1 } else { params.candidates - 1 };
+            let uniform = params.candidates_from == CandidateSource::Uniform;
             if draws > 0 {
-                draw_action_noise(&mut robots, &state.robots, draws, &mut state.noise, &mut state.warned);
+                let (order, noise) = (&state.robots, &mut state.noise);
+                draw_action_noise(&mut robots, order, (draws, uniform), noise, &mut state.warned);
             }
             if params.candidates > 1 {
-                policy.act_by_critics(&obs, &state.noise, &mut state.ws, &mut state.actions)
+                let others = match uniform {
+                    true => Candidates::Given(&state.noise),
+                    false => Candidates::Drawn(&state.noise),
+                };
+                policy.act_by_critics(&obs, others, &mut state.ws, &mut state.actions)
             } else {
                 let noise = params.sample.then_some(&state.noise[..]);
                 policy.act(&obs, noise, &mut state.ws, &mut state.actions)
@@ -414,9 +437,15 @@ mod tests {
         assert_ne!(drawn, run(false, Some(1)), "a draw is not the mean action");
         assert!(drawn.linear.abs() <= 1.0 && drawn.angular.abs() <= 1.0, "drawn actions stay in [−1, 1]");
         assert_eq!(run(true, None), run(false, Some(1)), "no ScenarioRng: tanh(μ), no panic");
-        let chosen = |seed: Option<u64>| run_with(SacPolicyParams { candidates: 16, ..params.clone() }, seed);
-        assert_eq!(chosen(Some(1)), chosen(Some(1)), "the critics' choice among the robot RNG's draws");
-        assert_eq!(chosen(None), run(false, Some(1)), "no ScenarioRng: tanh(μ) is the only candidate");
+        for candidates_from in [CandidateSource::Policy, CandidateSource::Uniform] {
+            let chosen =
+                |seed| run_with(SacPolicyParams { candidates: 16, candidates_from, ..params.clone() }, seed);
+            assert_eq!(chosen(Some(1)), chosen(Some(1)), "the critics' choice among the robot RNG's draws");
+            let a = chosen(Some(2));
+            assert!(a.linear.abs() <= 1.0 && a.angular.abs() <= 1.0, "{candidates_from:?}: {a:?}");
+        }
+        let chosen = run_with(SacPolicyParams { candidates: 16, ..params.clone() }, None);
+        assert_eq!(chosen, run(false, Some(1)), "no ScenarioRng: every draw is tanh(μ)");
         let missing =
             SacPolicyParams { checkpoint: Some("no/such/policy.safetensors".into()), ..Default::default() };
         assert!(missing.check().unwrap_err().contains("no/such/policy.safetensors"));

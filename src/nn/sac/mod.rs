@@ -11,5 +11,5 @@ pub mod update;
 mod widen;
 
 pub use config::{ACTION_LEN, STATE_LEN, SacNetConfig};
-pub use networks::{Observations, PolicyWorkspace, SacNetworks};
+pub use networks::{Candidates, Observations, PolicyWorkspace, SacNetworks};
 pub use update::{SacHyper, SacLearner, Transitions, UpdateStats};

@@ -55,6 +55,15 @@ pub struct FeatureWorkspace {
     chunks: Vec<ChunkActivations>,
 }
 
+/// The actions the critics weigh beside tanh(μ), `[n][k][2]`.
+#[derive(Clone, Copy, Debug)]
+pub enum Candidates<'a> {
+    /// Drawn from the policy with these standard normals.
+    Drawn(&'a [f32]),
+    /// These actions, in [−1, 1].
+    Given(&'a [f32]),
+}
+
 /// Buffers of the policy's forward pass in the environment loop.
 #[derive(Clone, Debug, Default)]
 pub struct PolicyWorkspace {
@@ -207,13 +216,13 @@ impl SacNetworks {
         }
     }
 
-    /// Actions `[n][2]` chosen by the twin critics: of tanh(μ) and the actions drawn with `noise`
-    /// (`[n][draws][2]`), the one with the highest min(Q₁, Q₂), the value SAC's actor is trained
-    /// to raise; ties go to the earlier candidate, so tanh(μ) first.
+    /// Actions `[n][2]` chosen by the twin critics: of tanh(μ) and the `others`, the one with the
+    /// highest min(Q₁, Q₂), the value SAC's actor is trained to raise; ties go to the earlier
+    /// candidate, so tanh(μ) first.
     pub fn act_by_critics(
         &self,
         obs: &Observations,
-        noise: &[f32],
+        others: Candidates,
         ws: &mut PolicyWorkspace,
         actions: &mut [f32],
     ) {
@@ -221,8 +230,9 @@ impl SacNetworks {
         if n == 0 {
             return;
         }
-        assert_eq!(noise.len() % (n * ACTION_LEN), 0, "noise: [n][draws][2]");
-        let draws = noise.len() / (n * ACTION_LEN);
+        let (Candidates::Drawn(given) | Candidates::Given(given)) = others;
+        assert_eq!(given.len() % (n * ACTION_LEN), 0, "candidates: [n][k][2]");
+        let draws = given.len() / (n * ACTION_LEN);
         let candidates = 1 + draws;
         self.policy_heads(obs, ws);
         let PolicyWorkspace { features, actor, candidates: cand, critic_input, critics, .. } = ws;
@@ -232,9 +242,14 @@ impl SacNetworks {
             let out = &mut cand[k * candidates * ACTION_LEN..(k + 1) * candidates * ACTION_LEN];
             let (mean, drawn) = out.split_at_mut(ACTION_LEN);
             tanh_gaussian::mean_action(head, mean);
-            let noise = &noise[k * draws * ACTION_LEN..(k + 1) * draws * ACTION_LEN];
-            for (a, e) in drawn.chunks_exact_mut(ACTION_LEN).zip(noise.chunks_exact(ACTION_LEN)) {
-                tanh_gaussian::sample(head, e, a, &mut [0.0]);
+            let given = &given[k * draws * ACTION_LEN..(k + 1) * draws * ACTION_LEN];
+            match others {
+                Candidates::Drawn(_) => {
+                    for (a, e) in drawn.chunks_exact_mut(ACTION_LEN).zip(given.chunks_exact(ACTION_LEN)) {
+                        tanh_gaussian::sample(head, e, a, &mut [0.0]);
+                    }
+                }
+                Candidates::Given(_) => drawn.copy_from_slice(given),
             }
         }
         critic_input.clear();
@@ -321,14 +336,14 @@ mod tests {
         let state = test_values(n * config.state_len(), 8);
         let obs = Observations { n, belief: &belief, grid: &grid, state: &state };
         let noise: Vec<f32> = test_values(n * draws * ACTION_LEN, 9).iter().map(|v| 3.0 * v).collect();
+        let given: Vec<f32> = noise.iter().map(|e| (e / 3.0).clamp(-1.0, 1.0)).collect();
         let mut ws = PolicyWorkspace::default();
         let (mut chosen, mut mean) = (vec![0.0; n * ACTION_LEN], vec![0.0; n * ACTION_LEN]);
         nets.act(&obs, None, &mut ws, &mut mean);
-        nets.act_by_critics(&obs, &[], &mut ws, &mut chosen);
+        nets.act_by_critics(&obs, Candidates::Drawn(&[]), &mut ws, &mut chosen);
         assert_eq!(chosen, mean, "no draws: tanh(μ)");
-        nets.act_by_critics(&obs, &noise, &mut ws, &mut chosen);
 
-        // Each candidate on its own: its action from `act`, its value from one critic row each.
+        // Each candidate on its own, valued by one critic row each; the first best wins.
         let mut features = Vec::new();
         nets.encode(&nets.params.values, &obs, &mut FeatureWorkspace::default(), &mut features);
         let f = nets.feature_len();
@@ -341,26 +356,39 @@ mod tests {
             });
             q[0].min(q[1])
         };
-        let mut picked_a_draw = false;
-        for k in 0..n {
-            let mut candidates = vec![mean[k * ACTION_LEN..(k + 1) * ACTION_LEN].to_vec()];
-            for j in 0..draws {
-                let e: Vec<f32> = (0..n)
-                    .flat_map(|r| {
-                        let at = (r * draws + j) * ACTION_LEN;
-                        noise[at..at + ACTION_LEN].to_vec()
-                    })
-                    .collect();
-                let mut drawn = vec![0.0; n * ACTION_LEN];
-                nets.act(&obs, Some(&e), &mut PolicyWorkspace::default(), &mut drawn);
-                candidates.push(drawn[k * ACTION_LEN..(k + 1) * ACTION_LEN].to_vec());
-            }
+        let robot = |actions: &[f32], k: usize| actions[k * ACTION_LEN..(k + 1) * ACTION_LEN].to_vec();
+        // (candidate index, action) of robot k's best among tanh(μ) and `others`.
+        let best_of = |k: usize, others: Vec<Vec<f32>>| {
+            let candidates: Vec<Vec<f32>> = std::iter::once(robot(&mean, k)).chain(others).collect();
             let values: Vec<f32> = candidates.iter().map(|a| lower_q(k, a)).collect();
             let best = (0..values.len()).fold(0, |b, c| if values[c] > values[b] { c } else { b });
-            let got = &chosen[k * ACTION_LEN..(k + 1) * ACTION_LEN];
-            assert_eq!(got, &candidates[best][..], "robot {k}: values {values:?}");
-            picked_a_draw |= best > 0;
+            (best, candidates[best].clone())
+        };
+        let mut picked_another = [false; 2];
+
+        nets.act_by_critics(&obs, Candidates::Given(&given), &mut ws, &mut chosen);
+        for k in 0..n {
+            let others = (0..draws).map(|j| robot(&given, k * draws + j)).collect();
+            let (best, action) = best_of(k, others);
+            assert_eq!(robot(&chosen, k), action, "given actions, robot {k}");
+            picked_another[0] |= best > 0;
         }
-        assert!(picked_a_draw, "some draw must beat tanh(μ), or the test shows nothing");
+
+        nets.act_by_critics(&obs, Candidates::Drawn(&noise), &mut ws, &mut chosen);
+        for k in 0..n {
+            // Draw j of every robot through `act`, which samples one action per robot.
+            let others = (0..draws)
+                .map(|j| {
+                    let e: Vec<f32> = (0..n).flat_map(|r| robot(&noise, r * draws + j)).collect();
+                    let mut drawn = vec![0.0; n * ACTION_LEN];
+                    nets.act(&obs, Some(&e), &mut PolicyWorkspace::default(), &mut drawn);
+                    robot(&drawn, k)
+                })
+                .collect();
+            let (best, action) = best_of(k, others);
+            assert_eq!(robot(&chosen, k), action, "drawn actions, robot {k}");
+            picked_another[1] |= best > 0;
+        }
+        assert_eq!(picked_another, [true; 2], "some candidate must beat tanh(μ), or the test shows nothing");
     }
 }
