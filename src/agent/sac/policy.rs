@@ -345,18 +345,6 @@ mod tests {
         world.spawn((RobotId(0), crop, grid, episode)).id()
     }
 
-    fn tiny() -> SacNetConfig {
-        SacNetConfig {
-            conv_channels: vec![2],
-            encoder_fc: 4,
-            mlp_width: 8,
-            belief_cells: 5,
-            belief_channels: 4,
-            grid_cells: 5,
-            depth_columns: 0,
-        }
-    }
-
     /// One robot through a 3-step episode and into the next, with a learning agent.
     #[test]
     fn every_action_gets_its_reward_and_the_last_step_ends_the_episode() {
@@ -364,7 +352,7 @@ mod tests {
         world.insert_resource(SacPolicyParams::default());
         world.insert_resource(EpisodeParams { steps: 3, change_maps: false });
         let config = SacAgentConfig { buffer: 10, batch: 1, learning_starts: 0, hyper: SacHyper::default() };
-        let agent = world.spawn(SacAgent::new(&tiny(), config, 1, 3, 7)).id();
+        let agent = world.spawn(SacAgent::new(&SacNetConfig::tiny(), config, 1, 3, 7)).id();
         let crop = BeliefCrop { cells: 5, centres: vec![], values: vec![0.5; 100] };
         let grid = LocalGrid { cells: 5, values: vec![1.0; 25], wide: None };
         let robot = spawn_robot(&mut world, crop, grid);
@@ -404,7 +392,7 @@ mod tests {
 
     #[test]
     fn a_checkpoint_policy_acts_deterministically_or_samples_and_a_bad_path_is_named() {
-        let nets = SacNetworks::new(&tiny(), 3);
+        let nets = SacNetworks::new(&SacNetConfig::tiny(), 3);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("policy.safetensors");
         nets.save(&path).unwrap();
@@ -465,7 +453,7 @@ mod tests {
     fn the_policy_inputs_are_checked_against_the_crop_grid_and_depth_steps() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("policy.safetensors");
-        SacNetworks::new(&SacNetConfig { belief_channels: 8, depth_columns: 3, ..tiny() }, 3)
+        SacNetworks::new(&SacNetConfig { belief_channels: 8, depth_columns: 3, ..SacNetConfig::tiny() }, 3)
             .save(&path)
             .unwrap();
         let mut world = World::new();
@@ -495,7 +483,7 @@ mod tests {
 
     #[test]
     fn a_depth_reading_agent_stores_the_strip_after_the_state_and_asks_for_the_depth_step() {
-        let config = SacNetConfig { depth_columns: 3, ..tiny() };
+        let config = SacNetConfig { depth_columns: 3, ..SacNetConfig::tiny() };
         let agent_config =
             SacAgentConfig { buffer: 10, batch: 1, learning_starts: 0, hyper: SacHyper::default() };
         let mut world = World::new();

@@ -123,6 +123,22 @@ impl SacNetConfig {
 }
 
 #[cfg(test)]
+impl SacNetConfig {
+    /// Networks small enough for a unit test to run them many times.
+    pub fn tiny() -> Self {
+        Self {
+            conv_channels: vec![2],
+            encoder_fc: 4,
+            mlp_width: 8,
+            belief_cells: 5,
+            belief_channels: 4,
+            grid_cells: 5,
+            depth_columns: 0,
+        }
+    }
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use crate::nn::sac::SacNetworks;

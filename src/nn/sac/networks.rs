@@ -320,15 +320,7 @@ mod tests {
 
     #[test]
     fn the_critics_choose_the_candidate_with_the_highest_lower_q() {
-        let config = SacNetConfig {
-            conv_channels: vec![2],
-            encoder_fc: 4,
-            mlp_width: 8,
-            belief_cells: 5,
-            belief_channels: 4,
-            grid_cells: 5,
-            depth_columns: 0,
-        };
+        let config = SacNetConfig::tiny();
         let nets = SacNetworks::new(&config, 5);
         let (n, draws) = (3, 6);
         let belief: Vec<f32> = test_values(n * 100, 6).iter().map(|v| v.abs()).collect();
