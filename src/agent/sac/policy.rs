@@ -40,7 +40,8 @@ pub struct SacPolicyParams {
     /// Actions weighed per step (default 1, tanh(μ) alone): with k > 1, tanh(μ) and k − 1 actions
     /// drawn with the robot's scenario RNG, of which the checkpoint's twin critics choose the
     /// one with the highest min(Q₁, Q₂) — a one-step policy improvement at test time, using the
-    /// critics training leaves beside the actor.
+    /// critics training leaves beside the actor. Like `sample`, unused while a learning agent is
+    /// in the world.
     pub candidates: usize,
     /// Where the k − 1 candidates come from (default the policy).
     pub candidates_from: CandidateSource,
