@@ -182,9 +182,8 @@ fn draw_action_noise(
             continue;
         };
         let rng = &mut rng.0;
-        noise.extend((0..draws * ACTION_LEN).map(|_| match uniform {
-            true => rng.random_range(-1.0..=1.0),
-            false => rng.sample::<f32, _>(StandardNormal),
+        noise.extend((0..draws * ACTION_LEN).map(|_| {
+            if uniform { rng.random_range(-1.0..=1.0) } else { rng.sample::<f32, _>(StandardNormal) }
         }));
     }
 }
@@ -285,10 +284,8 @@ pub fn sac_policy(
                 draw_action_noise(&mut robots, order, (draws, uniform), noise, &mut state.warned);
             }
             if params.candidates > 1 {
-                let others = match uniform {
-                    true => Candidates::Given(&state.noise),
-                    false => Candidates::Drawn(&state.noise),
-                };
+                let others =
+                    if uniform { Candidates::Given(&state.noise) } else { Candidates::Drawn(&state.noise) };
                 policy.act_by_critics(&obs, others, &mut state.ws, &mut state.actions)
             } else {
                 let noise = params.sample.then_some(&state.noise[..]);
