@@ -1,10 +1,10 @@
 //! `apfn collect --config FILE.ron --out DIR`: PF-net's training episodes on disk, in shards,
 //! resumable (a rerun continues at the first missing shard).
 
+use crate::cli::progress::progress_bar;
 use crate::compose::read_ron;
 use crate::train::collect::{CollectConfig, collect};
 use anyhow::Context;
-use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -21,9 +21,7 @@ pub struct CollectArgs {
 pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     let config: CollectConfig = read_ron(&args.config)?;
     let total = (config.shards * config.episodes_per_shard) as u64;
-    let bar = ProgressBar::new(total).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} episodes, eta {eta}").expect("static template"),
-    );
+    let bar = progress_bar(total, "{bar:40} {pos}/{len} episodes, eta {eta}");
     let started = Instant::now();
     let per_shard = config.episodes_per_shard as u64;
     let manifest =

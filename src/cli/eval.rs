@@ -3,6 +3,7 @@
 //! episodes.csv, steps.csv (the error at each step) with its figures under `curves/`, and
 //! paired.md, and with `--figures N` a PNG of each cell's first N episodes under `figures/`.
 
+use crate::cli::progress::progress_bar;
 use crate::cli::{count, set_threads};
 use crate::eval::{
     CellOutcome, EpisodeRow, EvalConfig, ResultRow, StepRow, cell_steps, cells, curve_figures, encode_png,
@@ -10,7 +11,6 @@ use crate::eval::{
 };
 use crate::world::map::write_atomically;
 use anyhow::Context;
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -36,10 +36,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let eval = EvalConfig::load(&args.config)?;
     let cells = cells(&eval);
     let total: u64 = cells.iter().map(|c| cell_steps(&eval, c)).sum();
-    let bar = ProgressBar::new(total).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} agent steps in {msg} cells, eta {eta}")
-            .expect("static progress template"),
-    );
+    let bar = progress_bar(total, "{bar:40} {pos}/{len} agent steps in {msg} cells, eta {eta}");
     bar.set_message(cells.len().to_string());
     let started = Instant::now();
     let outcomes = cells

@@ -10,6 +10,7 @@
 //! from another map, or a lost filter, is warned about).
 
 use crate::cli::count;
+use crate::cli::progress::progress_bar;
 use crate::particles::{InitParams, KldParams, MapFeatures, PfNetLikelihoodParams, ResampleParams, Task};
 use crate::replay::bag::{BagLog, BagTopics, read_bag};
 use crate::replay::{
@@ -20,7 +21,6 @@ use crate::world::map::{load_ros_map, write_atomically};
 use crate::world::{Pose2, angle_error, wrap_angle};
 use anyhow::{Context, ensure};
 use bevy::prelude::default;
-use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Clone, Debug, PartialEq)]
@@ -113,10 +113,7 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
     }
     let start_particles = filter.particles().len();
 
-    let bar = ProgressBar::new(lines.len() as u64).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} scans, {per_sec}, eta {eta}")
-            .expect("static progress template"),
-    );
+    let bar = progress_bar(lines.len() as u64, "{bar:40} {pos}/{len} scans, {per_sec}, eta {eta}");
     let estimates = filter.replay(&lines, || bar.inc(1));
     bar.finish_and_clear();
 

@@ -7,6 +7,7 @@ pub mod fuzz;
 pub mod localize;
 pub mod map;
 pub mod pfnet;
+mod progress;
 pub mod record;
 pub mod run;
 pub mod sac;

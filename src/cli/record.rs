@@ -13,6 +13,7 @@
 //! Episodes never reset while recording (the episode length is raised above `--steps`): a reset
 //! teleports the robot, which no odometry could explain.
 
+use crate::cli::progress::progress_bar;
 use crate::cli::run::SceneArgs;
 use crate::compose::{LoadedScene, MapName, Pipeline};
 use crate::plugin::headless_app;
@@ -21,7 +22,6 @@ use crate::sense::{LidarScan, Odometry};
 use crate::world::map::{save_ros_map, write_atomically};
 use crate::world::{OccupancyMap, OnMap, Pose2, PreviousPose};
 use anyhow::{Context, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Clone, Debug, PartialEq)]
@@ -56,10 +56,7 @@ pub struct Recording {
 
 pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let (loaded, pipeline) = args.input.load()?;
-    let bar = ProgressBar::new(args.steps).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {per_sec}, eta {eta}")
-            .expect("static progress template"),
-    );
+    let bar = progress_bar(args.steps, "{bar:40} {pos}/{len} steps, {per_sec}, eta {eta}");
     let map_count = loaded.maps.len();
     let recording = record(loaded, pipeline, args.steps, args.robot, || bar.inc(1))?;
     bar.finish_and_clear();

@@ -3,6 +3,7 @@
 
 use crate::act::Collided;
 use crate::agent::Action;
+use crate::cli::progress::progress_bar;
 use crate::cli::{count, set_threads};
 use crate::compose::{
     ComposeError, LoadedScene, MapName, Pipeline, Scene, relative_to_file, standard_registry,
@@ -17,7 +18,6 @@ use crate::world::map::write_atomically;
 use crate::world::{OnMap, TruePose};
 use anyhow::Context;
 use bevy::prelude::*;
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -113,10 +113,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let (loaded, pipeline) = args.input.load()?;
     let robots_per_world = loaded.maps.len() * loaded.scene.robots_per_map;
 
-    let bar = ProgressBar::new(args.steps * args.worlds).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} world-steps, {per_sec}, eta {eta}")
-            .expect("static progress template"),
-    );
+    let bar =
+        progress_bar(args.steps * args.worlds, "{bar:40} {pos}/{len} world-steps, {per_sec}, eta {eta}");
     let started = Instant::now();
     let worlds = (0..args.worlds)
         .into_par_iter()

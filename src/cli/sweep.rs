@@ -2,12 +2,12 @@
 //! progress bar, skipping finished ones, then the merged mean ± 95 % CI tables. For more than one
 //! machine: `--list-jobs`, `--job N` on each worker, then `--merge` (docs/cluster.md).
 
+use crate::cli::progress::progress_bar;
 use crate::cli::{count, set_threads};
 use crate::sweep::{
     JobStatus, LoadedSweep, SweepConfig, collect, job_at, job_status, job_steps, jobs, list_lines, markdown,
     merge, run_job, write_job_result, write_sweep,
 };
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -90,10 +90,7 @@ fn run_all(sweep: &LoadedSweep, out: &Path) -> anyhow::Result<()> {
         todo.len()
     );
     let total: u64 = todo.iter().map(|job| job_steps(sweep, job)).sum();
-    let bar = ProgressBar::new(total).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} agent steps in {msg} jobs, eta {eta}")
-            .expect("static progress template"),
-    );
+    let bar = progress_bar(total, "{bar:40} {pos}/{len} agent steps in {msg} jobs, eta {eta}");
     bar.set_message(todo.len().to_string());
     let started = Instant::now();
     todo.par_iter().try_for_each(|job| -> anyhow::Result<()> {

@@ -2,6 +2,7 @@
 //! progress bar, `train_log.csv`, `train_curves.png`, and atomic checkpoints (`last.safetensors` with the optimizer
 //! state for `--resume`, `best.safetensors` with the best validation loss).
 
+use crate::cli::progress::progress_bar;
 use crate::cli::set_threads;
 use crate::compose::read_ron;
 use crate::nn::checkpoint::Checkpoint;
@@ -14,7 +15,7 @@ use crate::train::pfnet::{
 };
 use crate::world::map::write_atomically;
 use anyhow::Context;
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -111,10 +112,7 @@ pub fn run(args: TrainPfNetArgs) -> anyhow::Result<()> {
     let ([train_banks, val_banks], (train, val)) = (&banks, (&train, &val));
     let pool = Workspaces::for_current_pool();
     let (mut buffers, mut grads) = (BatchBuffers::default(), GradBuffers::default());
-    let bar = ProgressBar::new(config.train_steps).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} steps, loss {msg}, eta {eta}")
-            .expect("static template"),
-    );
+    let bar = progress_bar(config.train_steps, "{bar:40} {pos}/{len} steps, loss {msg}, eta {eta}");
     bar.set_position(state.step);
     let mut since_log = (0.0, 0u64);
     while state.step < config.train_steps {

@@ -4,6 +4,7 @@
 //! replay buffer beside it), all written atomically; with `snapshot_every`, a kept copy of the
 //! policy every so many steps (`policy_<step>.safetensors`).
 
+use crate::cli::progress::progress_bar;
 use crate::cli::set_threads;
 use crate::compose::read_ron;
 use crate::train::curves::{CurveLabels, curves_png};
@@ -11,7 +12,6 @@ use crate::train::log::{read_log, write_log};
 use crate::train::sac::{SacTrainer, TrainSacConfig};
 use crate::world::map::write_atomically;
 use anyhow::Context;
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -73,10 +73,7 @@ pub fn run(args: TrainSacArgs) -> anyhow::Result<()> {
     );
 
     let started = Instant::now();
-    let bar = ProgressBar::new(trainer.config.steps).with_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} steps {per_sec} {msg} eta {eta}")
-            .expect("static template"),
-    );
+    let bar = progress_bar(trainer.config.steps, "{bar:30} {pos}/{len} steps {per_sec} {msg} eta {eta}");
     bar.set_position(trainer.step);
     let mut last_log = (Instant::now(), trainer.step);
     let mut window = Window::default();
