@@ -335,12 +335,17 @@ mod tests {
         (0..set.len()).filter(|&k| set.pose(k) != from).count()
     }
 
+    /// A robot whose particles all sit at WRONG, with w_fast already e³ below w_slow and a new
+    /// update (the second) whose scan fits far worse still.
+    fn collapsing_at_wrong_pose() -> (World, Entity) {
+        let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 2, ..Default::default() };
+        let state = RecoveryState { log_w: Some((-30.0, -33.0)), seen_updates: 1, ..Default::default() };
+        world_with_robot(WRONG, stats, Some(state))
+    }
+
     #[test]
     fn augmented_recovery_injects_when_the_likelihood_collapses() {
-        let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 2, ..Default::default() };
-        // w_fast already e³ below w_slow, and the new scan fits far worse still.
-        let state = RecoveryState { log_w: Some((-30.0, -33.0)), seen_updates: 1, ..Default::default() };
-        let (mut world, robot) = world_with_robot(WRONG, stats, Some(state));
+        let (mut world, robot) = collapsing_at_wrong_pose();
         world.run_system_once(augmented_recovery).expect("system runs");
         let p = world.get::<RecoveryState>(robot).expect("state").injection_probability;
         let expected = 1.0 - (0.9 * (-3.0f32).exp()) / 0.999;
@@ -421,13 +426,20 @@ mod tests {
         assert_eq!(state.seen_updates, 2);
     }
 
-    #[test]
-    fn augmented_recovery_restarts_at_episode_start_and_inserts_its_state() {
+    /// A robot whose averages collapsed in the last episode, at the first step of a new one whose
+    /// first update (stats) has run: its pose, those stats, the world and the robot.
+    fn collapsed_at_episode_start() -> (Pose2, LikelihoodStats, World, Entity) {
         let at = Pose2::new(0.5, 1.0, 0.3);
         let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 9, ..Default::default() };
         let collapsed = RecoveryState { log_w: Some((-30.0, -60.0)), seen_updates: 8, ..Default::default() };
         let (mut world, robot) = world_with_robot(at, stats, Some(collapsed));
         world.entity_mut(robot).insert(EpisodeStart);
+        (at, stats, world, robot)
+    }
+
+    #[test]
+    fn augmented_recovery_restarts_at_episode_start_and_inserts_its_state() {
+        let (at, stats, mut world, robot) = collapsed_at_episode_start();
         world.run_system_once(augmented_recovery).expect("system runs");
         let state = world.get::<RecoveryState>(robot).expect("state");
         assert_eq!(state.log_w, Some((-80.0, -80.0)), "averages restart at the episode's first update");
@@ -440,9 +452,7 @@ mod tests {
 
     #[test]
     fn recovery_before_update_injects_at_prior_weight_for_the_next_update_to_weigh() {
-        let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 2, ..Default::default() };
-        let state = RecoveryState { log_w: Some((-30.0, -33.0)), seen_updates: 1, ..Default::default() };
-        let (mut world, robot) = world_with_robot(WRONG, stats, Some(state));
+        let (mut world, robot) = collapsing_at_wrong_pose();
         world.run_system_once(recovery_before_update).expect("system runs");
         let set = world.get::<ParticleSet>(robot).expect("set").clone();
         let injected = world.get::<FilterHealth>(robot).expect("health").injected as usize;
@@ -474,11 +484,7 @@ mod tests {
 
     #[test]
     fn recovery_before_update_leaves_the_last_episode_behind_at_a_start() {
-        let at = Pose2::new(0.5, 1.0, 0.3);
-        let stats = LikelihoodStats { mean_log_likelihood: -80.0, updates: 9, ..Default::default() };
-        let collapsed = RecoveryState { log_w: Some((-30.0, -60.0)), seen_updates: 8, ..Default::default() };
-        let (mut world, robot) = world_with_robot(at, stats, Some(collapsed));
-        world.entity_mut(robot).insert(EpisodeStart);
+        let (at, stats, mut world, robot) = collapsed_at_episode_start();
         world.run_system_once(recovery_before_update).expect("system runs");
         let state = *world.get::<RecoveryState>(robot).expect("state");
         assert_eq!(
