@@ -47,6 +47,10 @@ pub struct PfNetLikelihoodParams {
     pub features: MapFeatures,
     /// Orientations the cached feature banks are encoded at (2π / N apart).
     pub orientations: usize,
+    /// Cached banks hold every phase of the map encoder's stride-2 pool: features every pixel
+    /// instead of every second one (0.1 m, or a wide view's 0.2 m, instead of twice that), for 4×
+    /// the banks' memory and build time.
+    pub pool_phases: bool,
     /// Multiplies the network's log-likelihoods before they reach the weights: a temperature.
     /// The network was trained on sequences without resampling, so its likelihoods are as sharp as
     /// that loss made them; below 1 the filter trusts each scan less and keeps more hypotheses
@@ -62,8 +66,16 @@ impl Default for PfNetLikelihoodParams {
             seed: 0,
             features: MapFeatures::Exact,
             orientations: FeatureCacheSpec::default().orientations,
+            pool_phases: FeatureCacheSpec::default().pool_phases,
             likelihood_scale: 1.0,
         }
+    }
+}
+
+impl PfNetLikelihoodParams {
+    /// The feature banks `features: cached` builds.
+    pub fn cache_spec(&self) -> FeatureCacheSpec {
+        FeatureCacheSpec { orientations: self.orientations, pool_phases: self.pool_phases }
     }
 }
 
@@ -238,11 +250,7 @@ pub fn pfnet_likelihood(
                     }
                     MapFeatures::Cached => {
                         let bank = banks.entry(on_map.0).or_insert_with(|| {
-                            let spec = FeatureCacheSpec {
-                                orientations: params.orientations,
-                                ..FeatureCacheSpec::default()
-                            };
-                            Arc::new(FeatureBank::build(&model, &map_view(map), &spec))
+                            Arc::new(FeatureBank::build(&model, &map_view(map), &params.cache_spec()))
                         });
                         bank.crop_features(&set.x, &set.y, &set.yaw, out);
                     }
@@ -335,13 +343,12 @@ mod tests {
         normalised(model.forward_steps(obs, (&maps, MapInput::LocalMaps), 1, 3, &mut Workspace::default()))
     }
 
-    /// `expected_weights` through the feature cache, with `orientations` banks.
-    fn expected_cached_weights(model: &PfNet, obs: &[f32], orientations: usize) -> Vec<f32> {
+    /// `expected_weights` through the feature banks of `spec`.
+    fn expected_cached_weights(model: &PfNet, obs: &[f32], spec: &FeatureCacheSpec) -> Vec<f32> {
         let map = NetworkMap::from_fine(&tiny_room(), 0.1);
-        let spec = FeatureCacheSpec { orientations, ..FeatureCacheSpec::default() };
         let (xs, ys, yaws) = pose_columns();
         let mut features = vec![0.0; 3 * model.map_feature_len()];
-        FeatureBank::build(model, &map_view(&map), &spec).crop_features(&xs, &ys, &yaws, &mut features);
+        FeatureBank::build(model, &map_view(&map), spec).crop_features(&xs, &ys, &yaws, &mut features);
         let features = (&features[..], MapInput::Features);
         normalised(model.forward_steps(obs, features, 1, 3, &mut Workspace::default()))
     }
@@ -530,7 +537,8 @@ mod tests {
     }
 
     /// A wide view read by a map encoder of its own is cached like the paper's view: the
-    /// system's weights are the training path's on both encoders' bank features.
+    /// system's weights are the training path's on both encoders' bank features, the banks
+    /// built as the parameters say (here with every pool phase).
     #[test]
     fn pfnet_likelihood_caches_a_wide_view_of_its_own_encoder() {
         let dir = tempfile::tempdir().unwrap();
@@ -539,8 +547,12 @@ mod tests {
         let model = PfNet::new(PfNetConfig::compact().with_wide_view(Some(view)), 4).unwrap();
         model.save(&path).unwrap();
         let checkpoint = Some(path.display().to_string());
-        let params =
-            PfNetLikelihoodParams { checkpoint, features: MapFeatures::Cached, ..Default::default() };
+        let params = PfNetLikelihoodParams {
+            checkpoint,
+            features: MapFeatures::Cached,
+            pool_phases: true,
+            ..Default::default()
+        };
         params.check().expect("a cacheable wide view");
         let mut world = World::new();
         world.insert_resource(params.clone());
@@ -552,8 +564,13 @@ mod tests {
 
         let weights = world.get::<ParticleSet>(robot).unwrap().weights();
         let obs = [grid(0).values, grid(5).values].concat();
-        let want = expected_cached_weights(&model, &obs, params.orientations);
+        let want = expected_cached_weights(&model, &obs, &params.cache_spec());
         assert!(weights.iter().zip(&want).all(|(w, e)| (w - e).abs() < 1e-5), "{weights:?} vs {want:?}");
+        let one_phase = expected_cached_weights(&model, &obs, &FeatureCacheSpec::default());
+        assert!(
+            want.iter().zip(&one_phase).any(|(a, b)| (a - b).abs() > 1e-6),
+            "the pool phases change what the particles see"
+        );
         assert!(weights.iter().any(|&w| (w - 1.0 / 3.0).abs() > 1e-4), "the network tells particles apart");
     }
 
