@@ -95,7 +95,8 @@ pub struct TrainPfNetConfig {
     /// the cache's features; the map encoder stays frozen at `init`'s weights, so each map's
     /// banks are built once.
     pub features: MapFeatures,
-    /// The banks' orientations (as `pfnet_likelihood`'s `cache`), with `features: cached`.
+    /// The banks, with `features: cached`: orientations and pool phases, to match the
+    /// `orientations` and `pool_phases` of the `pfnet_likelihood` that will read the checkpoint.
     pub cache: FeatureCacheSpec,
     /// Side of a local-map pixel, replacing the network's (paper: 0.1 m). Its 28 pixels see
     /// 2.8 m of map where the LiDAR grid spans 5 m, so in open halls the map window often holds
