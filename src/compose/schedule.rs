@@ -154,9 +154,7 @@ impl Pipeline {
             return Ok(false);
         };
         let mut de = ron::Deserializer::from_str(params).map_err(|e| e.to_string())?;
-        let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
-        let system =
-            new_entry.parse_params(&mut erased).map_err(|e| format!("parameters of `{new}`: {e}"))?;
+        let system = parse_step_params(new_entry, &mut de)?;
         let step = PipelineStep { name: new_entry.name, stage: new_entry.stage, system };
         let kept = self.steps.clone();
         edit(&mut self.steps, index, step);
@@ -269,11 +267,27 @@ impl<'de> DeserializeSeed<'de> for ParamsSeed<'_> {
     type Value = Box<dyn ConfiguredSystem>;
 
     fn deserialize<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
-        let mut erased = <dyn erased_serde::Deserializer>::erase(deserializer);
-        self.0
-            .parse_params(&mut erased)
-            .map_err(|e| de::Error::custom(format!("parameters of `{}`: {e}", self.0.name)))
+        parse_step_params(self.0, deserializer).map_err(de::Error::custom)
     }
+}
+
+/// Decodes `entry`'s parameters, naming the field a decoding error is in: the schedule file's
+/// line and column point at the value, but an eval config's `overrides` hold the parameters as
+/// text of their own, where only the field's name can say which value is wrong.
+fn parse_step_params<'de, D: Deserializer<'de>>(
+    entry: &crate::compose::registry::RegisteredSystem,
+    deserializer: D,
+) -> Result<Box<dyn ConfiguredSystem>, String> {
+    let mut track = serde_path_to_error::Track::new();
+    let tracked = serde_path_to_error::Deserializer::new(deserializer, &mut track);
+    let mut erased = <dyn erased_serde::Deserializer>::erase(tracked);
+    entry.parse_params(&mut erased).map_err(|e| {
+        let field = track.path().to_string();
+        match field.as_str() {
+            "." | "?" => format!("parameters of `{}`: {e}", entry.name),
+            _ => format!("parameters of `{}`, field `{field}`: {e}", entry.name),
+        }
+    })
 }
 
 #[cfg(test)]
@@ -441,6 +455,25 @@ mod tests {
             }
         }
         assert!(count >= 10, "systems/ ships the pipelines ({count} found)");
+    }
+
+    #[test]
+    fn a_wrong_parameter_value_is_named_by_its_field() {
+        let m = message(r#"Schedule(steps: [("lidar", (rays: 90, range_max_m: "far"))])"#);
+        assert!(
+            m.starts_with("test.ron:1:")
+                && m.contains("parameters of `lidar`, field `range_max_m`: Expected float"),
+            "the file's position and the field: {m}"
+        );
+        let mut p = parse(r#"Schedule(steps: [("lidar", ())])"#).expect("valid");
+        let e =
+            p.replace_step("lidar", "lidar", "(rays: -3)", &standard_registry()).expect_err("negative rays");
+        assert!(
+            e.starts_with("parameters of `lidar`, field `rays`: "),
+            "a replacement's text has no file: {e}"
+        );
+        let e = p.replace_step("lidar", "lidar", "(rays: 90)", &standard_registry());
+        assert_eq!(e, Ok(true), "good parameters still replace the step");
     }
 
     #[test]
