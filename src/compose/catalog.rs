@@ -22,7 +22,7 @@ use crate::particles::{
 use crate::replay::log_feed;
 use crate::sense::{
     DepthParams, DepthStrip, LidarParams, LidarScan, LocalGrid, LocalGridParams, Odometry, OdometryParams,
-    depth, lidar, local_grid, odometry,
+    ScanMatchingParams, depth, lidar, local_grid, odometry, scan_matching,
 };
 use crate::stage::ApfnSet::{self, *};
 use crate::world::TruePose;
@@ -78,6 +78,17 @@ pub fn standard_registry() -> Registry {
     .register::<LidarParams, _, _>(
         spec("lidar", Sense, "Reads TruePose, the map's RayGrid. Writes LidarScan.", data![], data![LidarScan]),
         lidar,
+    )
+    .register::<ScanMatchingParams, _, _>(
+        spec(
+            "scan_matching",
+            Sense,
+            "Reads LidarScan, Odometry, EpisodeStart. Writes Odometry (heading change aligned with the \
+             previous scan, and its error), ScanMemory.",
+            data![LidarScan, Odometry],
+            data![Odometry],
+        ),
+        scan_matching,
     )
     .register::<NoParams, _, _>(
         spec(

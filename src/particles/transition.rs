@@ -69,14 +69,17 @@ pub fn propagate(set: &mut ParticleSet, delta: &Pose2, params: &TransitionParams
         });
 }
 
-/// Reads Odometry, TransitionParams. Writes ParticleSet poses, FilterRng (one stream key per call).
+/// Reads Odometry (with the heading error a scan match narrowed, if any), TransitionParams.
+/// Writes ParticleSet poses, FilterRng (one stream key per call).
 pub fn transition(
     params: Res<TransitionParams>,
     mut robots: Query<(&Odometry, &mut ParticleSet, &mut FilterRng)>,
 ) {
     for (odometry, mut set, mut rng) in &mut robots {
         let key: u64 = rng.0.random();
-        propagate(&mut set, &odometry.delta, &params, key);
+        let narrowed =
+            odometry.yaw_std_rad.map(|std| TransitionParams { rot_noise_deg: std.to_degrees(), ..*params });
+        propagate(&mut set, &odometry.delta, narrowed.as_ref().unwrap_or(&params), key);
     }
 }
 
@@ -92,7 +95,7 @@ mod tests {
         let mut world = World::new();
         world.insert_resource(TransitionParams { trans_noise_m: 0.0, rot_noise_deg: 0.0 });
         let set = ParticleSet::from_poses(&[Pose2::new(1.0, 1.0, FRAC_PI_2), Pose2::new(0.0, 0.0, 0.0)]);
-        let odometry = Odometry { delta: Pose2::new(0.5, 0.0, 0.25) };
+        let odometry = Odometry { delta: Pose2::new(0.5, 0.0, 0.25), yaw_std_rad: None };
         let e = world.spawn((set, odometry, FilterRng::seeded(5))).id();
         world.run_system_once(transition).expect("transition runs");
         let set = world.get::<ParticleSet>(e).expect("set");
@@ -112,6 +115,26 @@ mod tests {
         let (sx, syaw) = (std(&set.x), std(&set.yaw).to_degrees());
         assert!((sx - 0.01).abs() < 0.001, "x spread should be ≈ 0.01 m, got {sx}");
         assert!((syaw - 5.0).abs() < 0.4, "yaw spread should be ≈ 5°, got {syaw}");
+    }
+
+    #[test]
+    fn a_narrowed_heading_change_is_drawn_with_its_own_error() {
+        let mut world = World::new();
+        world.insert_resource(TransitionParams::default());
+        let odometry = |yaw_std_rad| Odometry { delta: Pose2::default(), yaw_std_rad };
+        let set = || ParticleSet::from_poses(&vec![Pose2::default(); 4000]);
+        let wheels = world.spawn((set(), odometry(None), FilterRng::seeded(5))).id();
+        let matched = world.spawn((set(), odometry(Some(0.5f32.to_radians())), FilterRng::seeded(5))).id();
+        world.run_system_once(transition).expect("transition runs");
+        let spread = |robot| {
+            let yaw = &world.get::<ParticleSet>(robot).expect("set").yaw;
+            (yaw.iter().map(|a| a * a).sum::<f32>() / yaw.len() as f32).sqrt().to_degrees()
+        };
+        let (wheels, matched) = (spread(wheels), spread(matched));
+        assert!(
+            (wheels - 5.0).abs() < 0.4 && (matched - 0.5).abs() < 0.04,
+            "5° and 0.5°: {wheels}, {matched}"
+        );
     }
 
     #[test]

@@ -11,6 +11,9 @@ use serde::{Deserialize, Serialize};
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
 pub struct Odometry {
     pub delta: Pose2,
+    /// Std-dev of `delta.yaw`'s error where a step after the wheels narrowed it (`scan_matching`),
+    /// radians; `None`: the wheels' own, which the transition's parameters describe.
+    pub yaw_std_rad: Option<f32>,
 }
 
 /// Gaussian noise on the reported motion, per agent step.
