@@ -31,7 +31,7 @@ use crate::replay::error::ReplayError;
 use crate::replay::feed::{LogFeed, Reading};
 use crate::replay::fit::scan_fit;
 use crate::replay::log::{EstimateLine, LogLine};
-use crate::sense::{LidarScan, LocalGrid, LocalGridParams, Odometry};
+use crate::sense::{LidarScan, LocalGrid, LocalGridParams, Odometry, ScanMatchingParams};
 use crate::world::map::{DistanceField, TraversableMap};
 use crate::world::rng::stream;
 use crate::world::{OccupancyMap, OnMap, Pose2, Robot, RobotId, RobotParams, RobotRngs, TruePose};
@@ -50,6 +50,9 @@ pub struct LocalizerParams {
     pub init: InitParams,
     /// Motion noise added to every odometry delta.
     pub transition: TransitionParams,
+    /// Aligns each scan with the one before to narrow the odometry's heading change
+    /// (`scan_matching`, laser odometry); `None`: the odometry as logged.
+    pub scan_matching: Option<ScanMatchingParams>,
     /// Which observation model weighs the particles.
     pub model: ReplayModel,
     /// AMCL's likelihood-field observation model (used when `model` is `likelihood_field`).
@@ -70,6 +73,7 @@ impl Default for LocalizerParams {
         Self {
             init: InitParams::default(),
             transition: TransitionParams::default(),
+            scan_matching: None,
             model: ReplayModel::default(),
             likelihood_field: LikelihoodFieldParams::default(),
             beam_model: BeamModelParams::default(),
@@ -140,9 +144,13 @@ impl LocalizerParams {
                 (grid, format!("(\"pfnet_likelihood\", {})", ron(&self.pfnet)))
             }
         };
+        let matching = match &self.scan_matching {
+            Some(params) => format!("(\"scan_matching\", {}),", ron(params)),
+            None => String::new(),
+        };
         format!(
-            "Schedule(steps: [(\"log_feed\", ()), {grid} (\"init_particles\", {}), (\"transition\", {}), \
-             {likelihood}, (\"resample\", {}), (\"estimate\", ())])",
+            "Schedule(steps: [(\"log_feed\", ()), {matching} {grid} (\"init_particles\", {}), \
+             (\"transition\", {}), {likelihood}, (\"resample\", {}), (\"estimate\", ())])",
             ron(&self.init),
             ron(&self.transition),
             ron(&self.resample)
@@ -329,6 +337,13 @@ mod tests {
         let filter = ["init_particles", "transition", "mcl_likelihood_field", "resample", "estimate"];
         assert_eq!(systems(ReplayModel::LikelihoodField), [&["log_feed"][..], &filter].concat());
         assert_eq!(systems(ReplayModel::Beam)[3], "mcl_beam_model");
+        let params = LocalizerParams { scan_matching: Some(ScanMatchingParams::default()), ..small_radius() };
+        let matched = Localizer::new(tiny_room(), params, guess, 1).expect("filter").systems().to_vec();
+        assert_eq!(
+            matched[..2],
+            ["log_feed", "scan_matching"],
+            "the scan is matched before the filter moves"
+        );
     }
 
     /// A PF-net with a wide view gets the wide grid it reads, over its own window.
