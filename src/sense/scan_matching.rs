@@ -11,7 +11,7 @@
 use crate::episode::EpisodeStart;
 use crate::params::{StepParams, expect_param};
 use crate::sense::{LidarScan, Odometry};
-use crate::world::Pose2;
+use crate::world::{Pose2, wrap_angle};
 use bevy::prelude::*;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -155,8 +155,8 @@ pub fn match_heading(
 ) -> (f32, f32) {
     let (step, half) = (params.resolution_deg.to_radians(), params.search_deg.to_radians());
     let count = (half / step).round() as i64;
-    let score_at = |k: f64| memory.score(points, &Pose2::new(delta.x, delta.y, delta.yaw + k as f32 * step));
-    let scores: Vec<f32> = (-count..=count).map(|k| score_at(k as f64)).collect();
+    let score_at = |k: i64| memory.score(points, &Pose2::new(delta.x, delta.y, delta.yaw + k as f32 * step));
+    let scores: Vec<f32> = (-count..=count).map(score_at).collect();
     let best = scores.iter().enumerate().fold(0, |b, (i, s)| if *s > scores[b] { i } else { b });
     let offset = match (best.checked_sub(1).map(|i| scores[i]), scores.get(best + 1)) {
         (Some(left), Some(&right)) => {
@@ -190,7 +190,7 @@ pub fn scan_matching(
                     if usable {
                         let (correction, score) = match_heading(memory, &points, &odometry.delta, &params);
                         if score >= params.min_score {
-                            odometry.delta.yaw = crate::world::wrap_angle(odometry.delta.yaw + correction);
+                            odometry.delta.yaw = wrap_angle(odometry.delta.yaw + correction);
                             odometry.yaw_std_rad = Some(matched_std);
                         }
                     }
