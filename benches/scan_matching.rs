@@ -40,7 +40,7 @@ fn bench_map(c: &mut Criterion, name: &str, map: &OccupancyMap) {
             let scan = |at: Pose2| {
                 let mut scan = LidarScan::default();
                 cast_scan(&grid, at, &[], &lidar, &mut scan);
-                scan_hits(&scan)
+                scan_hits(&scan, params.max_range_m)
             };
             (scan(pose), scan(pose.compose(&motion)))
         })
