@@ -82,7 +82,8 @@ fn training_step(c: &mut Criterion) {
             sequence: steps,
             input: MapInput::LocalMaps,
         };
-        let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / n as f32 };
+        let loss =
+            PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / n as f32, mixture: None };
         let mut adam = Adam::new(AdamConfig::default(), model.params.len());
         let (mut grads, pool) = (GradBuffers::default(), Workspaces::for_current_pool());
         group.bench_function(format!("{name}_b{batch}_t{steps}_k{k}"), |b| {

@@ -4,6 +4,7 @@
 pub mod collect;
 pub mod eval;
 pub mod fuzz;
+pub mod landscape;
 pub mod localize;
 pub mod map;
 pub mod pfnet;

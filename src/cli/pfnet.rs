@@ -34,6 +34,10 @@ pub enum PfNetCommand {
     },
     /// Time one filter step (observation encoder + K likelihoods), or with `--train` one training step.
     Bench(BenchArgs),
+    /// Where, and how sharply, the network's likelihood peaks around true poses on a map, slice by
+    /// slice (forward, leftward, heading), beside the likelihood field's: one JSON object per
+    /// model and slice.
+    Landscape(crate::cli::landscape::LandscapeArgs),
     /// Write a checkpoint's network alone (weights and architecture, no optimizer state): a
     /// training run's `last.safetensors` becomes a file to ship, a third of its size.
     Export {
@@ -91,6 +95,7 @@ pub fn run(cmd: PfNetCommand) -> anyhow::Result<()> {
             println!("{}", serde_json::to_string(&report)?);
         }
         PfNetCommand::Bench(args) => bench(&args)?,
+        PfNetCommand::Landscape(args) => crate::cli::landscape::run(&args)?,
         PfNetCommand::Export { checkpoint, out, half } => {
             let model =
                 PfNet::load(&checkpoint).with_context(|| format!("--checkpoint {}", checkpoint.display()))?;
@@ -150,7 +155,12 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             sequence: args.steps,
             input: MapInput::LocalMaps,
         };
-        let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / steps as f32 };
+        let loss = PoseLoss {
+            weights: [1.0, 1.0, 0.36],
+            wrap_heading: true,
+            scale: 1.0 / steps as f32,
+            mixture: None,
+        };
         let mut adam = Adam::new(AdamConfig::default(), model.params.len());
         let mut grads = GradBuffers::default();
         time(args.reps, || {

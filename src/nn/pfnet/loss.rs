@@ -1,5 +1,7 @@
-//! PF-net's training loss: the squared error of the softmax-weighted mean particle.
+//! PF-net's training loss: the squared error of the softmax-weighted mean particle, and beyond the
+//! paper an optional mixture term that asks the weights to sit on the particles near the truth.
 
+use serde::{Deserialize, Serialize};
 use std::f32::consts::{PI, TAU};
 
 /// How the error of the weighted mean pose is scored.
@@ -12,6 +14,76 @@ pub struct PoseLoss {
     pub wrap_heading: bool,
     /// Multiplies the sum (the oracle averages over B·T·3 terms: scale = 1 / (B·T·3)).
     pub scale: f32,
+    /// Beyond the paper: adds the mixture term (`scale` applies to it too).
+    pub mixture: Option<MixtureLoss>,
+}
+
+/// −log of the true pose's density under the weighted particles, each a Gaussian kernel of
+/// `std_m` and `std_rad` (its constant dropped), as differentiable particle filters score their
+/// belief (Jonschkowski et al. 2018). The paper's loss scores only the weighted mean, so weights
+/// spread evenly over particles around the truth cost nothing: a network trained on it alone may
+/// stay flat over a metre (`apfn pfnet landscape`). This term pays for every bit of weight on
+/// particles far from the truth.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MixtureLoss {
+    /// Multiplies the term before it joins the paper's.
+    pub weight: f32,
+    /// Kernel widths in position (metres) and heading (degrees).
+    pub std_m: f32,
+    pub std_deg: f32,
+}
+
+impl MixtureLoss {
+    /// `Err("field: expected …")` for a term no run can use.
+    pub fn check(&self) -> Result<(), String> {
+        let positive = |x: f32| x.is_finite() && x > 0.0;
+        if !(self.weight.is_finite() && self.weight >= 0.0) {
+            return Err(format!("mixture.weight: expected a number ≥ 0, found {}", self.weight));
+        }
+        if !(positive(self.std_m) && positive(self.std_deg)) {
+            return Err(format!(
+                "mixture.std_m, mixture.std_deg: expected widths > 0, found {} m and {}°",
+                self.std_m, self.std_deg
+            ));
+        }
+        Ok(())
+    }
+
+    /// The term and its gradient, added into `dloglik`: with w = softmax(loglik) and r its
+    /// reweighting by each particle's kernel at the truth, d term / d loglik_k = w_k − r_k.
+    fn add(
+        &self,
+        loglik: &[f32],
+        states: &[[f32; 3]],
+        target: [f32; 3],
+        scale: f64,
+        dloglik: &mut [f64],
+    ) -> f64 {
+        let (var_m, var_rad) = (f64::from(self.std_m).powi(2), f64::from(self.std_deg.to_radians()).powi(2));
+        let log_kernel = |s: &[f32; 3]| {
+            let (dx, dy) = (f64::from(s[0] - target[0]), f64::from(s[1] - target[1]));
+            let dtheta = f64::from(wrap(s[2] - target[2]));
+            -0.5 * ((dx * dx + dy * dy) / var_m + dtheta * dtheta / var_rad)
+        };
+        let prior: Vec<f64> = loglik.iter().map(|&l| f64::from(l)).collect();
+        let posterior: Vec<f64> = prior.iter().zip(states).map(|(l, s)| l + log_kernel(s)).collect();
+        let (w, log_total_w) = softmax(&prior);
+        let (r, log_total_r) = softmax(&posterior);
+        let factor = f64::from(self.weight) * scale;
+        for ((d, w), r) in dloglik.iter_mut().zip(w).zip(r) {
+            *d += factor * (w - r);
+        }
+        factor * (log_total_w - log_total_r)
+    }
+}
+
+/// softmax(xs) and log Σ exp(xs).
+fn softmax(xs: &[f64]) -> (Vec<f64>, f64) {
+    let max = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let exp: Vec<f64> = xs.iter().map(|x| (x - max).exp()).collect();
+    let total: f64 = exp.iter().sum();
+    (exp.iter().map(|e| e / total).collect(), max + total.ln())
 }
 
 impl PoseLoss {
@@ -40,12 +112,13 @@ impl PoseLoss {
         let loss: f64 = (0..3).map(|c| f64::from(self.weights[c]) * error[c] * error[c]).sum::<f64>() * scale;
         // d loss / d mean_c, then through the softmax: d mean_c / d loglik_k = w_k (s_kc − mean_c).
         let dmean: Vec<f64> = (0..3).map(|c| 2.0 * f64::from(self.weights[c]) * error[c] * scale).collect();
-        let dloglik = weights
+        let mut dloglik: Vec<f64> = weights
             .iter()
             .zip(states)
-            .map(|(w, s)| (0..3).map(|c| dmean[c] * w * (f64::from(s[c]) - mean[c])).sum::<f64>() as f32)
+            .map(|(w, s)| (0..3).map(|c| dmean[c] * w * (f64::from(s[c]) - mean[c])).sum::<f64>())
             .collect();
-        (loss, dloglik)
+        let mixture = self.mixture.map_or(0.0, |m| m.add(loglik, states, target, scale, &mut dloglik));
+        (loss + mixture, dloglik.into_iter().map(|d| d as f32).collect())
     }
 }
 
@@ -59,14 +132,18 @@ mod tests {
     use super::*;
     use crate::nn::gradcheck::{assert_close, numerical_grad};
 
+    const PAPER: PoseLoss =
+        PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0, mixture: None };
+
     #[test]
     fn pose_loss_gradient_matches_finite_differences() {
         let states = [[0.1, 0.2, 0.3], [1.0, -0.5, 2.9], [-0.3, 0.4, -2.8], [0.5, 0.5, 0.0]];
         let target = [0.2, 0.1, 3.0];
         let loglik = [0.3f32, -1.2, 0.7, 0.1];
         for loss in [
-            PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 0.5 },
-            PoseLoss { weights: [1.0; 3], wrap_heading: false, scale: 1.0 / 3.0 },
+            PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 0.5, mixture: None },
+            PoseLoss { weights: [1.0; 3], wrap_heading: false, scale: 1.0 / 3.0, mixture: None },
+            PoseLoss { mixture: Some(MixtureLoss { weight: 0.7, std_m: 0.4, std_deg: 20.0 }), ..PAPER },
         ] {
             let (_, grad) = loss.evaluate(&loglik, &states, target);
             let x: Vec<f64> = loglik.iter().map(|&l| f64::from(l)).collect();
@@ -80,11 +157,40 @@ mod tests {
 
     #[test]
     fn pose_loss_is_zero_at_the_target_and_wraps_headings() {
-        let loss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 };
+        let loss = PAPER;
         let (at_target, _) = loss.evaluate(&[0.0], &[[1.0, 2.0, 3.1]], [1.0, 2.0, 3.1]);
         assert!(at_target < 1e-12, "a perfect estimate costs nothing");
         let (across_pi, _) = loss.evaluate(&[0.0], &[[0.0, 0.0, 3.1]], [0.0, 0.0, -3.1]);
         let want = 0.36 * f64::from(TAU - 6.2).powi(2);
         assert!((across_pi - want).abs() < 1e-6, "heading error across ±π wraps: {across_pi} vs {want}");
+    }
+
+    #[test]
+    fn mixture_term_matches_a_hand_calculation_and_rewards_weight_near_the_truth() {
+        // Two particles, one at the truth and one 0.5 m off: kernels 1 and e^{-0.5·(0.5/0.5)²}.
+        let mixture = MixtureLoss { weight: 1.0, std_m: 0.5, std_deg: 10.0 };
+        let loss = PoseLoss { weights: [0.0; 3], mixture: Some(mixture), ..PAPER };
+        let states = [[0.0, 0.0, 0.0], [0.5, 0.0, 0.0]];
+        let (even, grad) = loss.evaluate(&[0.0, 0.0], &states, [0.0, 0.0, 0.0]);
+        let want = -(0.5 * (1.0 + (-0.5f64).exp())).ln();
+        assert!((even - want).abs() < 1e-9, "{even} vs {want}");
+        assert!(grad[0] < 0.0 && grad[1] > 0.0, "more weight on the truth lowers it: {grad:?}");
+        let (sharp, _) = loss.evaluate(&[3.0, 0.0], &states, [0.0, 0.0, 0.0]);
+        assert!(sharp < even, "weights on the truth cost less: {sharp} vs {even}");
+        // The paper's loss alone cannot tell weights spread symmetrically around the truth from
+        // weights on it; the mixture term can.
+        let around = [[-0.4, 0.0, 0.0], [0.4, 0.0, 0.0], [0.0, 0.0, 0.0]];
+        let paper = |l: &[f32]| PAPER.evaluate(l, &around, [0.0; 3]).0;
+        let with = |l: &[f32]| loss.evaluate(l, &around, [0.0; 3]).0;
+        assert!((paper(&[0.0, 0.0, 0.0]) - paper(&[0.0, 0.0, 5.0])).abs() < 1e-9);
+        assert!(with(&[0.0, 0.0, 5.0]) < with(&[0.0, 0.0, 0.0]) - 0.1);
+    }
+
+    #[test]
+    fn mixture_term_rejects_zero_widths_by_name() {
+        let bad = MixtureLoss { weight: 1.0, std_m: 0.0, std_deg: 5.0 };
+        assert!(bad.check().unwrap_err().starts_with("mixture.std_m"));
+        let bad = MixtureLoss { weight: f32::NAN, std_m: 0.1, std_deg: 5.0 };
+        assert!(bad.check().unwrap_err().starts_with("mixture.weight"));
     }
 }

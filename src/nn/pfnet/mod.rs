@@ -21,7 +21,7 @@ mod widen;
 pub use batch::{MAP_ENCODER_CHUNK, PARTICLE_CHUNK, Workspaces};
 pub use config::{ConvBranch, PfNetConfig, WideView};
 pub use feature_cache::{FeatureBank, FeatureCacheSpec};
-pub use loss::PoseLoss;
+pub use loss::{MixtureLoss, PoseLoss};
 pub use model::{MapInput, ParamCounts, PfNet, Workspace, is_map_encoder_param};
 pub use observation::{DEPTH_BIN_M, Observation, depth_image};
 pub use reference::{ReferenceError, VerifyReport, from_keras_layout, load_reference_model, verify};

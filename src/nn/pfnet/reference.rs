@@ -107,7 +107,8 @@ pub fn verify(dir: &Path) -> Result<VerifyReport, ReferenceError> {
     let (obs, maps, states, targets) = (get("obs")?, get("local_maps")?, get("states")?, get("targets")?);
     let (want_loglik, want_loss) = (get("loglik")?, get("loss")?);
     let (steps, k) = (maps.shape[0], maps.shape[1]);
-    let loss = PoseLoss { weights: [1.0; 3], wrap_heading: false, scale: 1.0 / (steps * 3) as f32 };
+    let loss =
+        PoseLoss { weights: [1.0; 3], wrap_heading: false, scale: 1.0 / (steps * 3) as f32, mixture: None };
 
     let mut grads = vec![0.0; model.params.len()];
     let mut ws = Workspace::default();

@@ -211,7 +211,8 @@ mod tests {
         }
     }
 
-    const LOSS: PoseLoss = PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / 6.0 };
+    const LOSS: PoseLoss =
+        PoseLoss { weights: [1.0, 1.0, 0.36], wrap_heading: true, scale: 1.0 / 6.0, mixture: None };
 
     #[test]
     fn train_step_lowers_the_loss_on_a_fixed_batch() {
