@@ -348,3 +348,16 @@ fn threads_are_set_once_per_process() {
     let err = apfn::cli::set_threads(Some(running + 1)).unwrap_err().to_string();
     assert!(err.contains("--threads") && err.contains(&format!("already runs {running} worker")), "{err}");
 }
+
+#[test]
+fn pfnet_landscape_runs_on_an_apartment_and_refuses_bad_counts_by_flag() {
+    let checkpoint = concat!(env!("CARGO_MANIFEST_DIR"), "/models/pfnet_compact.safetensors");
+    let base = ["pfnet", "landscape", "--checkpoint", checkpoint, "--apartment", "3", "--poses", "2"];
+    apfn(&[&base[..], &["--points", "5"]].concat()).unwrap();
+    let even = apfn(&[&base[..], &["--points", "4"]].concat()).unwrap_err().to_string();
+    assert_eq!(even, "--points: expected an odd count ≥ 3, found 4");
+    let none = apfn(&[&base[..6], &["--poses", "0"]].concat()).unwrap_err().to_string();
+    assert!(none.starts_with("--poses"), "{none}");
+    let both = apfn(&[&base[..], &["--map", "m.yaml"]].concat()).unwrap_err().to_string();
+    assert!(both.contains("--map") && both.contains("--apartment"), "{both}");
+}
