@@ -350,7 +350,7 @@ fn threads_are_set_once_per_process() {
 }
 
 #[test]
-fn pfnet_landscape_runs_on_an_apartment_and_refuses_bad_counts_by_flag() {
+fn pfnet_landscape_runs_on_an_apartment_and_refuses_bad_values_by_flag() {
     let checkpoint = concat!(env!("CARGO_MANIFEST_DIR"), "/models/pfnet_compact.safetensors");
     let base = ["pfnet", "landscape", "--checkpoint", checkpoint, "--apartment", "3", "--poses", "2"];
     apfn(&[&base[..], &["--points", "5"]].concat()).unwrap();
@@ -358,6 +358,8 @@ fn pfnet_landscape_runs_on_an_apartment_and_refuses_bad_counts_by_flag() {
     assert_eq!(even, "--points: expected an odd count ≥ 3, found 4");
     let none = apfn(&[&base[..6], &["--poses", "0"]].concat()).unwrap_err().to_string();
     assert!(none.starts_with("--poses"), "{none}");
+    let span = apfn(&[&base[..], &["--span-m=-1"]].concat()).unwrap_err().to_string();
+    assert_eq!(span, "--span-m: expected more than 0 and at most 10 m, found -1");
     let both = apfn(&[&base[..], &["--map", "m.yaml"]].concat()).unwrap_err().to_string();
     assert!(both.contains("--map") && both.contains("--apartment"), "{both}");
 }

@@ -169,6 +169,16 @@ pub fn run(args: &LandscapeArgs) -> anyhow::Result<()> {
         args.points
     );
     crate::limits::EPISODES.check("--poses", args.poses).map_err(anyhow::Error::msg)?;
+    anyhow::ensure!(
+        args.span_m.is_finite() && args.span_m > 0.0 && args.span_m <= 10.0,
+        "--span-m: expected more than 0 and at most 10 m, found {}",
+        args.span_m
+    );
+    anyhow::ensure!(
+        args.span_rad.is_finite() && args.span_rad > 0.0 && args.span_rad <= std::f32::consts::PI,
+        "--span-rad: expected more than 0 and at most π rad, found {}",
+        args.span_rad
+    );
     let model = PfNet::load(&args.checkpoint)
         .with_context(|| format!("--checkpoint {}", args.checkpoint.display()))?;
     for row in landscape(&model, &load_scene(args)?, args)? {
