@@ -5,8 +5,9 @@
 //! ones), deterministic for the seed. Each batch draws B episodes (a fresh permutation every
 //! epoch, across maps and episodes), K particles around a perturbed true pose at the first step,
 //! moved by the odometry after it, with no motion noise and no resampling; the loss is the paper's
-//! Δx² + Δy² + β·Δθ² of the weighted mean, averaged over B and T. Every random draw of step s
-//! comes from a stream keyed by (seed, s), so `--resume` continues exactly.
+//! Δx² + Δy² + β·Δθ² of the weighted mean (plus, when configured, the `mixture` term), averaged
+//! over B and T. Every random draw of step s comes from a stream keyed by (seed, s), so
+//! `--resume` continues exactly.
 
 use crate::compose::{LoadedScene, Pipeline, Scene, standard_registry};
 use crate::nn::adam::{Adam, AdamConfig};

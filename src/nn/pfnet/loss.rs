@@ -19,7 +19,7 @@ pub struct PoseLoss {
 }
 
 /// −log of the true pose's density under the weighted particles, each a Gaussian kernel of
-/// `std_m` and `std_rad` (its constant dropped), as differentiable particle filters score their
+/// `std_m` and `std_deg` (its constant dropped), as differentiable particle filters score their
 /// belief (Jonschkowski et al. 2018). The paper's loss scores only the weighted mean, so weights
 /// spread evenly over particles around the truth cost nothing: a network trained on it alone may
 /// stay flat over a metre (`apfn pfnet landscape`). This term pays for every bit of weight on
