@@ -64,7 +64,7 @@ pub struct TrainPfNetConfig {
     /// around the perturbed centre, with any heading (beyond the paper, whose particles all start
     /// near the truth: the filter's semi-global start asks the network to tell apart hypotheses
     /// metres away). Unlike the filter's box, walls are not excluded. Measured worse on every
-    /// passive cell at 0.5 (README), so the default stays 0.
+    /// passive cell at 0.5 (docs/pfnet.md), so the default stays 0.
     pub wide_fraction: f32,
     pub wide_box_m: f32,
     /// Heading weight β of the loss (paper: 0.36).
@@ -74,7 +74,7 @@ pub struct TrainPfNetConfig {
     /// Default none (the paper's loss).
     pub mixture: Option<MixtureLoss>,
     /// Adam (the paper's table: 2.5e-3; the authors' code: 5e-5 constant, the default: measured
-    /// over 1,000 steps, the larger rates stay on the loss's early plateau, README).
+    /// over 1,000 steps, the larger rates stay on the loss's early plateau, docs/pfnet.md).
     pub adam: AdamConfig,
     /// When set, the learning rate falls from `adam.learning_rate` to this one along a half
     /// cosine over `train_steps` (constant when absent, as in the authors' code).
@@ -106,7 +106,7 @@ pub struct TrainPfNetConfig {
     /// Side of a local-map pixel, replacing the network's (paper: 0.1 m). Its 28 pixels see
     /// 2.8 m of map where the LiDAR grid spans 5 m, so in open halls the map window often holds
     /// no wall the scan shows; 0.18 m makes the two windows one (4,500 steps on from the 0.1 m
-    /// model: 5 cm better on the depot, worse on the four other real maps, README). The pixel
+    /// model: 5 cm better on the depot, worse on the four other real maps, docs/pfnet.md). The pixel
     /// count stays, so `init`'s weights still fit. Default: the network's.
     pub local_map_cell_m: Option<f32>,
     /// Beyond the paper: a second, zoomed-out view (`PfNetConfig::wide_view`): the local map

@@ -76,7 +76,7 @@ pub struct PfNetConfig {
 /// observation's last channel, `local_grid`'s `wide_extent_m`). The paper's grid spans 5 m, so in
 /// a hall whose walls and pillars lie farther away the network sees nothing to match; even MCL's
 /// exact sensor model, given only the beams ending in that window, tracks 3–4 times worse there
-/// (README, a wide view for the halls).
+/// (docs/pfnet.md, a wide view for the halls).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WideView {
