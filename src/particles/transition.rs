@@ -38,14 +38,27 @@ impl StepParams for TransitionParams {
     }
 }
 
-/// Moves every particle by `delta` (robot frame) plus N(0, σ) noise on (Δx, Δy, Δyaw). Noise for
-/// chunk c of `TRANSITION_CHUNK` particles comes from `stream(&[key, c])`; chunks run in parallel.
-/// Negative sigmas are read as their magnitude.
+impl TransitionParams {
+    /// `delta` plus N(0, σ) noise on (Δx, Δy, Δyaw); negative sigmas are read as their magnitude.
+    /// Without noise (PF-net pretraining, infogain's reach plans) nothing is drawn from `rng`.
+    pub fn noisy(&self, delta: &Pose2, rng: &mut impl Rng) -> Pose2 {
+        let sigma_t = self.trans_noise_m.abs();
+        let sigma_r = self.rot_noise_deg.abs().to_radians();
+        if sigma_t == 0.0 && sigma_r == 0.0 {
+            return *delta;
+        }
+        Pose2::new(
+            delta.x + sigma_t * rng.sample::<f32, _>(StandardNormal),
+            delta.y + sigma_t * rng.sample::<f32, _>(StandardNormal),
+            delta.yaw + sigma_r * rng.sample::<f32, _>(StandardNormal),
+        )
+    }
+}
+
+/// Moves every particle by `delta` (robot frame) plus N(0, σ) noise on (Δx, Δy, Δyaw)
+/// (`TransitionParams::noisy`). Noise for chunk c of `TRANSITION_CHUNK` particles comes from
+/// `stream(&[key, c])`; chunks run in parallel.
 pub fn propagate(set: &mut ParticleSet, delta: &Pose2, params: &TransitionParams, key: u64) {
-    let sigma_t = params.trans_noise_m.abs();
-    let sigma_r = params.rot_noise_deg.abs().to_radians();
-    // Without noise (PF-net pretraining, infogain's reach plans) nothing needs drawing.
-    let exact = sigma_t == 0.0 && sigma_r == 0.0;
     let ParticleSet { x, y, yaw, .. } = set;
     x.par_chunks_mut(TRANSITION_CHUNK)
         .zip(y.par_chunks_mut(TRANSITION_CHUNK))
@@ -54,15 +67,7 @@ pub fn propagate(set: &mut ParticleSet, delta: &Pose2, params: &TransitionParams
         .for_each(|(chunk, ((xs, ys), yaws))| {
             let mut rng = stream(&[key, chunk as u64]);
             for ((px, py), pyaw) in xs.iter_mut().zip(ys.iter_mut()).zip(yaws.iter_mut()) {
-                let noisy = if exact {
-                    *delta
-                } else {
-                    Pose2::new(
-                        delta.x + sigma_t * rng.sample::<f32, _>(StandardNormal),
-                        delta.y + sigma_t * rng.sample::<f32, _>(StandardNormal),
-                        delta.yaw + sigma_r * rng.sample::<f32, _>(StandardNormal),
-                    )
-                };
+                let noisy = params.noisy(delta, &mut rng);
                 let moved = Pose2::new(*px, *py, *pyaw).compose(&noisy);
                 (*px, *py, *pyaw) = (moved.x, moved.y, moved.yaw);
             }

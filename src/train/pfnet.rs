@@ -16,7 +16,8 @@ use crate::nn::pfnet::{
     FeatureBank, FeatureCacheSpec, GradBuffers, LocalMapSpec, MapInput, MixtureLoss, Observation, PfNet,
     PfNetConfig, PoseLoss, StepBatch, WideView, Workspaces, crop_local_map_stack, depth_image,
 };
-use crate::particles::{MapFeatures, map_view};
+use crate::params::StepParams;
+use crate::particles::{MapFeatures, TransitionParams, map_view};
 use crate::train::collect::load_collection;
 use crate::train::episodes::{EpisodeSet, RecordedEpisode, simulate_episodes};
 use crate::world::map::procedural::{ApartmentParams, Split};
@@ -67,6 +68,11 @@ pub struct TrainPfNetConfig {
     /// passive cell at 0.5 (docs/pfnet.md), so the default stays 0.
     pub wide_fraction: f32,
     pub wide_box_m: f32,
+    /// Noise added to each particle's odometry between steps (paper: none, the particles keep
+    /// their offsets from the truth). Beyond the paper, the filter's own noise (`transition`'s
+    /// 1 cm / 5°) makes a sequence drift as a filter's particles do, so that the weights a
+    /// sequence accumulates must follow particles that wander. Default none.
+    pub transition: TransitionParams,
     /// Heading weight β of the loss (paper: 0.36).
     pub heading_weight: f32,
     /// Beyond the paper: a mixture term added to the loss (`MixtureLoss`), which pays for weight
@@ -143,6 +149,7 @@ impl Default for TrainPfNetConfig {
             init_std_deg: 30.0,
             wide_fraction: 0.0,
             wide_box_m: 3.3,
+            transition: TransitionParams { trans_noise_m: 0.0, rot_noise_deg: 0.0 },
             heading_weight: 0.36,
             mixture: None,
             adam: AdamConfig { learning_rate: 5e-5, ..AdamConfig::default() },
@@ -212,6 +219,7 @@ impl TrainPfNetConfig {
         if let Some(mixture) = self.mixture {
             mixture.check()?;
         }
+        self.transition.check().map_err(|e| format!("transition.{e}"))?;
         self.adam.check().map_err(|e| format!("adam.{e}"))?;
         if let Some(rate) = self.final_learning_rate
             && !(rate >= 0.0 && rate <= self.adam.learning_rate)
@@ -411,7 +419,10 @@ impl BatchBuffers {
                 .collect();
             for step in 0..t {
                 if step > 0 {
-                    particles.iter_mut().for_each(|p| *p = p.compose(&episode.odometry[step]));
+                    let odometry = &episode.odometry[step];
+                    particles
+                        .iter_mut()
+                        .for_each(|p| *p = p.compose(&config.transition.noisy(odometry, rng)));
                 }
                 let s = b * t + step;
                 let truth = episode.poses[step];
@@ -647,6 +658,63 @@ mod tests {
         );
         let wider = TrainPfNetConfig { wide_fraction: 1.5, ..config };
         assert_eq!(wider.check().unwrap_err(), "wide_fraction: expected 0 to 1, found 1.5");
+    }
+
+    /// Without noise a particle keeps its offset from the truth along the whole sequence (the
+    /// episodes' odometry is exact); with the filter's noise the offsets drift, and the drift is
+    /// drawn from the batch's stream, so one seed gives one batch.
+    #[test]
+    fn transition_noise_makes_the_particles_drift_from_their_offsets() {
+        let config = TrainPfNetConfig {
+            train_maps: 1,
+            val_maps: 1,
+            train_episodes: 2,
+            val_episodes: 1,
+            steps: 6,
+            batch: 2,
+            particles: 20,
+            ..TrainPfNetConfig::default()
+        };
+        let [data, _] = simulate_data(&config, |_, _| {}).unwrap();
+        let model = TrainState::new(&config).unwrap().model;
+        let (k, t) = (config.particles, config.steps as usize);
+        // Each particle's offset from the truth at every step of sequence 0.
+        let offsets = |config: &TrainPfNetConfig, seed: u64| {
+            let mut buffers = BatchBuffers::default();
+            buffers.fill(config, &model, (&data, &[]), &[0, 1], &mut stream(&[seed]));
+            (0..t)
+                .map(|step| {
+                    let [tx, ty, tyaw] = buffers.targets[step];
+                    // Both move by the same exact odometry, so p ⊕ truth⁻¹ stays.
+                    let truth_inverse = Pose2::new(tx, ty, tyaw).between(&Pose2::default());
+                    buffers.states[step * k..(step + 1) * k]
+                        .iter()
+                        .map(|&[x, y, yaw]| Pose2::new(x, y, yaw).compose(&truth_inverse))
+                        .collect::<Vec<_>>()
+                })
+                .collect::<Vec<_>>()
+        };
+        let drift = |offsets: &[Vec<Pose2>]| {
+            let (first, last) = (&offsets[0], &offsets[t - 1]);
+            first.iter().zip(last).map(|(a, b)| (a.x - b.x).hypot(a.y - b.y)).fold(0.0f32, f32::max)
+        };
+        let exact = offsets(&config, 3);
+        assert!(drift(&exact) < 1e-4, "without noise the offsets stay: {} m", drift(&exact));
+        let noisy_config = TrainPfNetConfig {
+            transition: TransitionParams { trans_noise_m: 0.01, rot_noise_deg: 5.0 },
+            ..config.clone()
+        };
+        let noisy = offsets(&noisy_config, 3);
+        assert!(
+            drift(&noisy) > 0.005,
+            "five noisy moves shift some offset by more than 5 mm: {} m",
+            drift(&noisy)
+        );
+        assert_eq!(noisy, offsets(&noisy_config, 3), "one seed, one batch");
+        assert_ne!(noisy, offsets(&noisy_config, 4));
+        let negative = TransitionParams { rot_noise_deg: f32::NAN, ..noisy_config.transition.clone() };
+        let err = TrainPfNetConfig { transition: negative, ..config }.check().unwrap_err();
+        assert_eq!(err, "transition.rot_noise_deg: expected a std-dev ≥ 0°");
     }
 
     #[test]
