@@ -71,7 +71,8 @@ pub struct TrainPfNetConfig {
     /// Noise added to each particle's odometry between steps (paper: none, the particles keep
     /// their offsets from the truth). Beyond the paper, the filter's own noise (`transition`'s
     /// 1 cm / 5°) makes a sequence drift as a filter's particles do, so that the weights a
-    /// sequence accumulates must follow particles that wander. Default none.
+    /// sequence accumulates must follow particles that wander. Measured worse in procedural halls
+    /// (docs/pfnet.md), so the default stays none.
     pub transition: TransitionParams,
     /// Heading weight β of the loss (paper: 0.36).
     pub heading_weight: f32,
