@@ -201,6 +201,7 @@ fn landscape(model: &PfNet, scene: &Scene, args: &LandscapeArgs) -> anyhow::Resu
     let owner = vec![0u32; args.points];
     let mut maps = vec![0.0; args.points * model.local_map_len()];
     let mut loglik = vec![0.0; args.points];
+    let view = map_view(&scene.network);
     for _ in 0..args.poses {
         let truth = scene.traversable.sample_pose(&scene.map, &mut rng);
         let scan = observation(model, scene, truth, &mut obs);
@@ -211,7 +212,6 @@ fn landscape(model: &PfNet, scene: &Scene, args: &LandscapeArgs) -> anyhow::Resu
             let poses: Vec<Pose2> = offsets.iter().map(|&o| axis.offset(truth, o)).collect();
             let column = |f: fn(&Pose2) -> f32| poses.iter().map(f).collect::<Vec<f32>>();
             let (xs, ys, yaws) = (column(|p| p.x), column(|p| p.y), column(|p| p.yaw));
-            let view = map_view(&scene.network);
             crop_local_map_stack(&view, &xs, &ys, &yaws, &model.config.local_maps(), &mut maps);
             model.log_likelihoods_exact(&terms, &owner, &maps, &mut loglik, &pool);
             summaries[0][a].push(summarise(&offsets, &loglik));

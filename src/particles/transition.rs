@@ -33,8 +33,9 @@ impl Default for TransitionParams {
 
 impl StepParams for TransitionParams {
     fn check(&self) -> Result<(), String> {
-        expect_param(self.trans_noise_m >= 0.0, "trans_noise_m", "a std-dev ≥ 0 m")?;
-        expect_param(self.rot_noise_deg >= 0.0, "rot_noise_deg", "a std-dev ≥ 0°")
+        let std_dev = |x: f32| x >= 0.0 && x.is_finite();
+        expect_param(std_dev(self.trans_noise_m), "trans_noise_m", "a std-dev ≥ 0 m")?;
+        expect_param(std_dev(self.rot_noise_deg), "rot_noise_deg", "a std-dev ≥ 0°")
     }
 }
 

@@ -4,9 +4,9 @@
 //! Data: goalnav episodes simulated on seen apartments before training (validation on unseen
 //! ones), deterministic for the seed. Each batch draws B episodes (a fresh permutation every
 //! epoch, across maps and episodes), K particles around a perturbed true pose at the first step,
-//! moved by the odometry after it, with no motion noise and no resampling; the loss is the paper's
-//! Δx² + Δy² + β·Δθ² of the weighted mean (plus, when configured, the `mixture` term), averaged
-//! over B and T. Every random draw of step s comes from a stream keyed by (seed, s), so
+//! moved by the odometry after it (with no motion noise unless `transition` adds the filter's) and
+//! no resampling; the loss is the paper's Δx² + Δy² + β·Δθ² of the weighted mean (plus, when
+//! configured, the `mixture` term), averaged over B and T. Every random draw of step s comes from a stream keyed by (seed, s), so
 //! `--resume` continues exactly.
 
 use crate::compose::{LoadedScene, Pipeline, Scene, standard_registry};
@@ -714,8 +714,11 @@ mod tests {
         assert_eq!(noisy, offsets(&noisy_config, 3), "one seed, one batch");
         assert_ne!(noisy, offsets(&noisy_config, 4));
         let negative = TransitionParams { rot_noise_deg: f32::NAN, ..noisy_config.transition.clone() };
-        let err = TrainPfNetConfig { transition: negative, ..config }.check().unwrap_err();
+        let err = TrainPfNetConfig { transition: negative, ..config.clone() }.check().unwrap_err();
         assert_eq!(err, "transition.rot_noise_deg: expected a std-dev ≥ 0°");
+        let endless = TransitionParams { trans_noise_m: f32::INFINITY, ..noisy_config.transition };
+        let err = TrainPfNetConfig { transition: endless, ..config }.check().unwrap_err();
+        assert_eq!(err, "transition.trans_noise_m: expected a std-dev ≥ 0 m");
     }
 
     #[test]

@@ -50,11 +50,12 @@ impl MixtureLoss {
         Ok(())
     }
 
-    /// The term and its gradient, added into `dloglik`: with w = softmax(loglik) and r its
-    /// reweighting by each particle's kernel at the truth, d term / d loglik_k = w_k − r_k.
+    /// The term, −log Σ_k w_k κ_k, and its gradient, added into `dloglik`: with w the particles'
+    /// weights (softmax of their log-likelihoods) and r ∝ w κ their reweighting by each one's
+    /// kernel κ at the truth, d term / d loglik_k = w_k − r_k.
     fn add(
         &self,
-        loglik: &[f32],
+        weights: &[f64],
         states: &[[f32; 3]],
         target: [f32; 3],
         scale: f64,
@@ -66,24 +67,17 @@ impl MixtureLoss {
             let dtheta = f64::from(wrap(s[2] - target[2]));
             -0.5 * ((dx * dx + dy * dy) / var_m + dtheta * dtheta / var_rad)
         };
-        let prior: Vec<f64> = loglik.iter().map(|&l| f64::from(l)).collect();
-        let posterior: Vec<f64> = prior.iter().zip(states).map(|(l, s)| l + log_kernel(s)).collect();
-        let (w, log_total_w) = softmax(&prior);
-        let (r, log_total_r) = softmax(&posterior);
+        // In log space, so that kernels far below f64's range still rank the particles.
+        let log_wk: Vec<f64> = weights.iter().zip(states).map(|(w, s)| w.ln() + log_kernel(s)).collect();
+        let max = log_wk.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let exp: Vec<f64> = log_wk.iter().map(|x| (x - max).exp()).collect();
+        let total: f64 = exp.iter().sum();
         let factor = f64::from(self.weight) * scale;
-        for ((d, w), r) in dloglik.iter_mut().zip(w).zip(r) {
-            *d += factor * (w - r);
+        for ((d, w), e) in dloglik.iter_mut().zip(weights).zip(exp) {
+            *d += factor * (w - e / total);
         }
-        factor * (log_total_w - log_total_r)
+        -factor * (max + total.ln())
     }
-}
-
-/// softmax(xs) and log Σ exp(xs).
-fn softmax(xs: &[f64]) -> (Vec<f64>, f64) {
-    let max = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let exp: Vec<f64> = xs.iter().map(|x| (x - max).exp()).collect();
-    let total: f64 = exp.iter().sum();
-    (exp.iter().map(|e| e / total).collect(), max + total.ln())
 }
 
 impl PoseLoss {
@@ -117,7 +111,7 @@ impl PoseLoss {
             .zip(states)
             .map(|(w, s)| (0..3).map(|c| dmean[c] * w * (f64::from(s[c]) - mean[c])).sum::<f64>())
             .collect();
-        let mixture = self.mixture.map_or(0.0, |m| m.add(loglik, states, target, scale, &mut dloglik));
+        let mixture = self.mixture.map_or(0.0, |m| m.add(&weights, states, target, scale, &mut dloglik));
         (loss + mixture, dloglik.into_iter().map(|d| d as f32).collect())
     }
 }
