@@ -116,6 +116,15 @@ pub struct TrainPfNetConfig {
     /// model: 5 cm better on the depot, worse on the four other real maps, docs/pfnet.md). The pixel
     /// count stays, so `init`'s weights still fit. Default: the network's.
     pub local_map_cell_m: Option<f32>,
+    /// Beyond the paper: the particle at its local map's centre instead of the bottom centre
+    /// (`LocalMapSpec::centred`), replacing the network's layout; with `local_map_cell_m` set to
+    /// the grid's cell (5 m / 28 pixels) map and scan features then meet where they show the same
+    /// place. Default: the network's.
+    pub local_map_centred: Option<bool>,
+    /// Beyond the paper: filters of each of the joint stage's locally-connected layers, where
+    /// map and scan features meet, replacing the network's (8 in both); a network trained from
+    /// scratch only (`init` must hold as many). Default: the network's.
+    pub joint_filters: Option<usize>,
     /// Beyond the paper: a second, zoomed-out view (`PfNetConfig::wide_view`): the local map
     /// again at `map_cell_m` pixels and the scan again over `grid_extent_m`, which the collect
     /// schedule's `local_grid` (or `data`'s) must record as its `wide_extent_m`. An `init`
@@ -164,6 +173,8 @@ impl Default for TrainPfNetConfig {
             features: MapFeatures::Exact,
             cache: FeatureCacheSpec::default(),
             local_map_cell_m: None,
+            local_map_centred: None,
+            joint_filters: None,
             wide_view: None,
         }
     }
@@ -241,6 +252,11 @@ impl TrainPfNetConfig {
         if let Some(cell_m) = self.local_map_cell_m {
             LocalMapSpec::check_cell_m("local_map_cell_m", cell_m)?;
         }
+        if let Some(filters) = self.joint_filters
+            && !(1..=64).contains(&filters)
+        {
+            return Err(format!("joint_filters: expected 1 to 64, found {filters}"));
+        }
         if self.wide_view.is_some_and(|view| !view.own_map_encoder) && self.features == MapFeatures::Cached {
             return Err("wide_view: the feature cache holds map encoders of one map channel, expected \
                  `own_map_encoder: true` or `features: exact`"
@@ -253,6 +269,15 @@ impl TrainPfNetConfig {
         PfNetConfig::named(&self.network)
             .map(|_| ())
             .ok_or_else(|| format!("network: expected `paper` or `compact`, found `{}`", self.network))
+    }
+
+    /// `network`'s local map with `local_map_cell_m` and `local_map_centred` applied.
+    fn local_map(&self, network: LocalMapSpec) -> LocalMapSpec {
+        LocalMapSpec {
+            cell_m: self.local_map_cell_m.unwrap_or(network.cell_m),
+            centred: self.local_map_centred.unwrap_or(network.centred),
+            ..network
+        }
     }
 
     fn map_input(&self) -> MapInput {
@@ -525,9 +550,8 @@ impl TrainState {
     /// Fresh weights from the seed, or `config.init`'s (which must be of `config.network`).
     pub fn new(config: &TrainPfNetConfig) -> anyhow::Result<Self> {
         let mut network = PfNetConfig::named(&config.network).expect("checked").observing(config.observation);
-        if let Some(cell_m) = config.local_map_cell_m {
-            network.local_map.cell_m = cell_m;
-        }
+        network.local_map = config.local_map(network.local_map);
+        network.joint_filters = config.joint_filters.unwrap_or(network.joint_filters);
         let network = network.with_wide_view(config.wide_view);
         let model = match &config.init {
             None => PfNet::new(network, config.seed).map_err(anyhow::Error::msg)?,
@@ -535,10 +559,9 @@ impl TrainState {
                 let model = PfNet::load(Path::new(path)).with_context(|| format!("init: {path}"))?;
                 let mut model =
                     model.widened_to(config.observation).map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
-                // A pixel's size is in no weight: the same filters read a wider window.
-                if let Some(cell_m) = config.local_map_cell_m {
-                    model.config.local_map.cell_m = cell_m;
-                }
+                // A pixel's size and the particle's place are in no weight: the same filters
+                // read another window.
+                model.config.local_map = config.local_map(model.config.local_map);
                 if let Some(view) = config.wide_view {
                     model = model.with_wide_view(view).map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
                 }
@@ -755,6 +778,10 @@ mod tests {
         let mixture = Some(MixtureLoss { weight: 0.03, std_m: 0.2, std_deg: -10.0 });
         assert!(
             err(TrainPfNetConfig { mixture, ..ok.clone() }).starts_with("mixture.std_m, mixture.std_deg")
+        );
+        assert_eq!(
+            err(TrainPfNetConfig { joint_filters: Some(0), ..ok.clone() }),
+            "joint_filters: expected 1 to 64, found 0"
         );
         let adam = AdamConfig { beta1: -0.1, ..ok.adam.clone() };
         assert_eq!(

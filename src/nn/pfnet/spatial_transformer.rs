@@ -9,9 +9,10 @@
 //! - Poses: world metres, x right, y up, yaw counter-clockwise from +x (as `Pose2`).
 //! - Image: the layout of the observation grid (`LocalGrid`): row 0 farthest ahead, column 0 the
 //!   particle's left (+y of its frame). The particle stands at the bottom centre facing up, so it
-//!   sees what lies ahead: pixel (r, c)'s centre is, in the particle's frame,
-//!   forward = (cells − r − 0.5)·cell_m, left = (cells/2 − c − 0.5)·cell_m (cells/2 real-valued,
-//!   so an odd side stays centred).
+//!   sees what lies ahead (or, with `centred`, at the centre, as the robot in the grid): pixel
+//!   (r, c)'s centre is, in the particle's frame, forward = (a − r − 0.5)·cell_m,
+//!   left = (cells/2 − c − 0.5)·cell_m, with a = cells (cells/2 when centred; cells/2
+//!   real-valued, so an odd side stays centred).
 //! - Values: the network's encoding 1 − occupancy (1 = free, 0 = occupied).
 //! - Sampling: bilinear between cell centres, so a pixel centre landing on a cell centre reads that
 //!   cell exactly, and one halfway between a free and an occupied cell reads 0.5.
@@ -58,15 +59,26 @@ pub struct LocalMapSpec {
     pub cells: usize,
     /// Side of one pixel, metres.
     pub cell_m: f32,
+    /// Beyond the paper: the particle at the image's centre, as the robot sits in the LiDAR grid,
+    /// instead of at its bottom centre (PF-net's layout, made for a camera that sees ahead). With
+    /// the grid's window and a centre, a map feature and the scan feature beside it in the joint
+    /// stage show the same place, so its locally-connected layers compare like with like.
+    #[serde(default)]
+    pub centred: bool,
 }
 
 impl Default for LocalMapSpec {
     fn default() -> Self {
-        Self { cells: 28, cell_m: 0.1 }
+        Self { cells: 28, cell_m: 0.1, centred: false }
     }
 }
 
 impl LocalMapSpec {
+    /// Pixels between the particle and the image's top edge (its far edge ahead).
+    pub fn pixels_ahead(&self) -> f32 {
+        if self.centred { self.cells as f32 / 2.0 } else { self.cells as f32 }
+    }
+
     /// Checks a pixel side for `field`: 0.01–1 m.
     pub fn check_cell_m(field: &str, cell_m: f32) -> Result<(), String> {
         match (0.01..=1.0).contains(&cell_m) {
@@ -100,7 +112,7 @@ impl SamplePlan {
         let forward = [cos * pixel_in_cells, sin * pixel_in_cells];
         let left = [-sin * pixel_in_cells, cos * pixel_in_cells];
         // Pixel (0, 0): the far left corner pixel.
-        let forward_0 = spec.cells as f32 - 0.5;
+        let forward_0 = spec.pixels_ahead() - 0.5;
         let left_0 = spec.cells as f32 / 2.0 - 0.5;
         SamplePlan {
             first: [
@@ -462,6 +474,22 @@ mod tests {
     }
 
     #[test]
+    fn a_centred_particle_sees_half_the_window_behind_it() {
+        // Centred at a pose, the image is the bottom-centred one of the pose half a window back.
+        let map = wall_map();
+        let centred = LocalMapSpec { centred: true, ..LocalMapSpec::default() };
+        let (x, y, yaw) = (1.7f32, 2.1f32, 0.4f32);
+        let mut got = vec![f32::NAN; CELLS * CELLS];
+        crop_local_maps(&map.view(), &[x], &[y], &[yaw], &centred, &mut got);
+        let back = CELLS as f32 / 2.0 * centred.cell_m;
+        let want = crop(&map, x - back * yaw.cos(), y - back * yaw.sin(), yaw);
+        for k in 0..CELLS * CELLS {
+            assert!((got[k] - want[k]).abs() < 1e-4, "pixel {k}: got {}, want {}", got[k], want[k]);
+        }
+        assert_ne!(got, crop(&map, x, y, yaw), "the bottom-centred image is another window");
+    }
+
+    #[test]
     fn map_origin_offset_and_yaw_are_honoured() {
         let plain = wall_map();
         let mut moved = wall_map();
@@ -488,7 +516,7 @@ mod tests {
         let mut out = Vec::new();
         for r in 0..spec.cells {
             for c in 0..spec.cells {
-                let forward = (cells - r as f64 - 0.5) * cell_m;
+                let forward = (f64::from(spec.pixels_ahead()) - r as f64 - 0.5) * cell_m;
                 let left = (cells / 2.0 - c as f64 - 0.5) * cell_m;
                 let wx = x + yaw.cos() * forward - yaw.sin() * left;
                 let wy = y + yaw.sin() * forward + yaw.cos() * left;
@@ -515,8 +543,15 @@ mod tests {
         map.occupancy.iter_mut().for_each(|o| *o = rng.random::<f32>());
         map.resolution_m = 0.1;
         map.origin = (0.3, -0.7, 2.5);
-        // Odd side, pixels coarser than cells, poses inside, across the edge and far off.
-        let spec = LocalMapSpec { cells: 5, cell_m: 0.17 };
+        // Odd side, pixels coarser than cells, poses inside, across the edge and far off; the
+        // particle at the bottom centre and at the centre.
+        for centred in [false, true] {
+            let spec = LocalMapSpec { cells: 5, cell_m: 0.17, centred };
+            check_against_reference(&map, &spec, &mut rng);
+        }
+    }
+
+    fn check_against_reference(map: &TestMap, spec: &LocalMapSpec, rng: &mut Pcg64) {
         let poses: Vec<(f32, f32, f32)> = (0..12)
             .map(|_| (rng.random_range(-2.5..1.5), rng.random_range(-1.0..2.5), rng.random_range(-PI..PI)))
             .collect();
@@ -525,11 +560,11 @@ mod tests {
         let yaws: Vec<f32> = poses.iter().map(|p| p.2).collect();
         let pixels = spec.cells * spec.cells;
         let mut out = vec![f32::NAN; poses.len() * pixels];
-        crop_local_maps(&map.view(), &xs, &ys, &yaws, &spec, &mut out);
+        crop_local_maps(&map.view(), &xs, &ys, &yaws, spec, &mut out);
         for (k, &pose) in poses.iter().enumerate() {
-            let want = reference_crop(&map, pose, &spec);
+            let want = reference_crop(map, pose, spec);
             for (p, (&got, &want)) in out[k * pixels..(k + 1) * pixels].iter().zip(&want).enumerate() {
-                assert!((got - want).abs() < 2e-4, "pose {k} pixel {p}: got {got}, want {want}");
+                assert!((got - want).abs() < 2e-4, "{spec:?} pose {k} pixel {p}: got {got}, want {want}");
             }
         }
     }
@@ -562,7 +597,10 @@ mod tests {
         let mut rng = Pcg64::seed_from_u64(7);
         let mut map = TestMap::free(30, 20);
         map.occupancy.iter_mut().for_each(|o| *o = rng.random::<f32>());
-        let specs = [LocalMapSpec { cells: 4, cell_m: 0.1 }, LocalMapSpec { cells: 4, cell_m: 0.25 }];
+        let specs = [
+            LocalMapSpec { cells: 4, ..LocalMapSpec::default() },
+            LocalMapSpec { cells: 4, cell_m: 0.25, centred: false },
+        ];
         let (xs, ys, yaws) = ([0.6, 1.9], [0.4, 1.2], [0.3, -2.0]);
         let mut stack = vec![f32::NAN; 2 * 2 * 16];
         crop_local_map_stack(&map.view(), &xs, &ys, &yaws, &specs, &mut stack);
