@@ -745,6 +745,22 @@ mod tests {
     }
 
     #[test]
+    fn the_layout_and_joint_options_reach_the_network() {
+        let config = TrainPfNetConfig {
+            local_map_cell_m: Some(0.18),
+            local_map_centred: Some(true),
+            joint_filters: Some(4),
+            ..TrainPfNetConfig::default()
+        };
+        let model = TrainState::new(&config).unwrap().model;
+        let local = model.config.local_map;
+        assert_eq!((local.cells, local.cell_m, local.centred), (28, 0.18, true));
+        assert_eq!(model.config.joint_filters, 4);
+        let paper_joint = TrainState::new(&TrainPfNetConfig::default()).unwrap().model;
+        assert!(model.params.len() < paper_joint.params.len(), "half the joint stage's weights");
+    }
+
+    #[test]
     fn a_training_checkpoint_with_damaged_metadata_names_the_key() {
         let config = TrainPfNetConfig::default();
         let mut file = TrainState::new(&config).unwrap().to_checkpoint(&config);
