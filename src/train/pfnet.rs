@@ -119,11 +119,13 @@ pub struct TrainPfNetConfig {
     /// Beyond the paper: the particle at its local map's centre instead of the bottom centre
     /// (`LocalMapSpec::centred`), replacing the network's layout; with `local_map_cell_m` set to
     /// the grid's cell (5 m / 28 pixels) map and scan features then meet where they show the same
-    /// place. Default: the network's.
+    /// place. Measured from scratch, either way it trains far worse (docs/pfnet.md). Default: the
+    /// network's.
     pub local_map_centred: Option<bool>,
     /// Beyond the paper: filters of each of the joint stage's locally-connected layers, where
     /// map and scan features meet, replacing the network's (8 in both); a network trained from
-    /// scratch only (`init` must hold as many). Default: the network's.
+    /// scratch only (`init` must hold as many). 16 learned no faster over 1,500 steps
+    /// (docs/pfnet.md). Default: the network's.
     pub joint_filters: Option<usize>,
     /// Beyond the paper: a second, zoomed-out view (`PfNetConfig::wide_view`): the local map
     /// again at `map_cell_m` pixels and the scan again over `grid_extent_m`, which the collect

@@ -61,8 +61,9 @@ pub struct LocalMapSpec {
     pub cell_m: f32,
     /// Beyond the paper: the particle at the image's centre, as the robot sits in the LiDAR grid,
     /// instead of at its bottom centre (PF-net's layout, made for a camera that sees ahead). With
-    /// the grid's window and a centre, a map feature and the scan feature beside it in the joint
-    /// stage show the same place, so its locally-connected layers compare like with like.
+    /// the grid's window, a map feature and the scan feature beside it in the joint stage then
+    /// show the same place; with the paper's 240° LiDAR it trains far worse (docs/pfnet.md, a
+    /// local map laid out as the grid).
     #[serde(default)]
     pub centred: bool,
 }
