@@ -97,11 +97,8 @@ pub struct FeatureBank {
 struct EncoderBank {
     orientations: Vec<Orientation>,
     channels: usize,
-    /// Side of a particle's local map, pixels (n), one pixel's side δ, metres, and the pixels
-    /// between the particle and the map's far edge (n, or n/2 when `centred`).
-    side: usize,
-    cell_m: f64,
-    ahead: f64,
+    /// A particle's local map: its side n, pixel side δ and the particle's place in it.
+    local: LocalMapSpec,
     /// Window pixels between neighbouring bank cells: 2, or 1 with every pool phase.
     pixels_per_cell: f64,
 }
@@ -189,8 +186,7 @@ impl EncoderBank {
             })
             .collect();
         let pixels_per_cell = if spec.pool_phases { 1.0 } else { 2.0 };
-        let (side, cell_m, ahead) = (local.cells, f64::from(local.cell_m), f64::from(local.pixels_ahead()));
-        Self { orientations, channels, side, cell_m, ahead, pixels_per_cell }
+        Self { orientations, channels, local, pixels_per_cell }
     }
 
     fn memory_bytes(&self) -> usize {
@@ -200,7 +196,7 @@ impl EncoderBank {
     }
 
     fn feature_len(&self) -> usize {
-        self.channels * (self.side / 2).pow(2)
+        self.channels * (self.local.cells / 2).pow(2)
     }
 
     fn crop_one(&self, x: f32, y: f32, yaw: f32, out: &mut [f32]) {
@@ -209,7 +205,9 @@ impl EncoderBank {
         let nearest = ((yaw * count as f64 / TAU).round() as i64).rem_euclid(count as i64) as usize;
         let bank = &self.orientations[nearest];
         let (sin, cos) = yaw.sin_cos();
-        let (n, a, d) = (self.side as f64, self.ahead, self.cell_m);
+        // The pixels between the particle and the map's far edge: n, or n/2 when centred.
+        let (n, a, d) =
+            (self.local.cells as f64, f64::from(self.local.pixels_ahead()), f64::from(self.local.cell_m));
         // Bank coordinates (I, J) of the point `forward`, `left` pixels from the particle.
         let to_bank = |forward: f64, left: f64| {
             let q = [x + (forward * cos - left * sin) * d, y + (forward * sin + left * cos) * d];
@@ -229,7 +227,7 @@ impl EncoderBank {
         let dj = [(next_j[0] - first[0]) as f32, (next_j[1] - first[1]) as f32];
         let first = [first[0] as f32, first[1] as f32];
 
-        let (half, c) = (self.side / 2, self.channels);
+        let (half, c) = (self.local.cells / 2, self.channels);
         let (max_u, max_v) = ((bank.rows - 1) as f32, (bank.cols - 1) as f32);
         // Each feature cell's top-left bank tap and its bilinear fractions, then the channels one
         // at a time, so that the output is written in order.
