@@ -282,6 +282,35 @@ fn train_pfnet_local_map_cell_m_widens_the_window_of_init() {
     assert_eq!(bad.check().unwrap_err(), "local_map_cell_m: expected 0.01 to 1 m, found 0");
 }
 
+/// A checkpoint whose map encoder sees the map alone starts a `scan_on_map` run: the first loss is
+/// its own (the scan's channel starts at zero), the step then trains that channel, and the feature
+/// cache, which cannot hold features that change with the scan, is refused by name.
+#[test]
+fn train_pfnet_scan_on_map_starts_from_a_checkpoint_without_it() {
+    use apfn::nn::pfnet::ScanOnMap;
+    let dir = tempfile::tempdir().unwrap();
+    let init = PfNet::new(PfNetConfig::compact(), 5).unwrap();
+    let plain = TrainPfNetConfig { init: Some(saved(&init, dir.path(), "init")), ..tiny() };
+    let laid = TrainPfNetConfig { scan_on_map: Some(ScanOnMap { grid_extent_m: 5.0 }), ..plain.clone() };
+    let [train, _] = simulate_data(&plain, |_, _| {}).unwrap();
+    let pool = Workspaces::for_current_pool();
+    let mut runs = vec![];
+    for config in [&plain, &laid] {
+        let mut state = TrainState::new(config).unwrap();
+        let (mut buffers, mut grads) = (BatchBuffers::default(), GradBuffers::default());
+        let loss = state.train_step(config, (&train, &[]), &mut buffers, &mut grads, &pool);
+        runs.push((loss, state.model));
+    }
+    let ((plain_loss, _), (laid_loss, model)) = (&runs[0], &runs[1]);
+    assert!((plain_loss - laid_loss).abs() <= 1e-6 * plain_loss, "{plain_loss} against {laid_loss}");
+    let id = model.params.find("m_c3/kernel").expect("the map encoder's first 3×3 conv");
+    let scan_taps = model.params.get(id).chunks_exact(9).skip(1).step_by(2);
+    assert!(scan_taps.flatten().any(|&w| w != 0.0), "the scan's channel learns");
+
+    let cached = TrainPfNetConfig { features: MapFeatures::Cached, ..laid };
+    assert!(cached.check().unwrap_err().starts_with("scan_on_map: the map features then change"));
+}
+
 /// A one-view checkpoint starts a wide-view run: on the same episodes, the widened network's
 /// first loss is the one-view network's to the bit (the new channels start at zero), and the
 /// step then trains them. Episodes without wide grids of the view's window are refused by name;

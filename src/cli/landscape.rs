@@ -11,7 +11,7 @@
 
 use crate::cli::set_threads;
 use crate::compose::NETWORK_RESOLUTION_M;
-use crate::nn::pfnet::{PfNet, Workspaces, crop_local_map_stack, depth_image};
+use crate::nn::pfnet::{PfNet, Workspaces, depth_image};
 use crate::particles::{LikelihoodFieldParams, ParticleSet, add_log_likelihoods, map_view};
 use crate::sense::{
     DepthParams, LidarParams, LidarScan, LocalGridParams, RayGrid, cast_scan, depth_strip, rasterize_scan,
@@ -212,7 +212,7 @@ fn landscape(model: &PfNet, scene: &Scene, args: &LandscapeArgs) -> anyhow::Resu
             let poses: Vec<Pose2> = offsets.iter().map(|&o| axis.offset(truth, o)).collect();
             let column = |f: fn(&Pose2) -> f32| poses.iter().map(f).collect::<Vec<f32>>();
             let (xs, ys, yaws) = (column(|p| p.x), column(|p| p.y), column(|p| p.yaw));
-            crop_local_map_stack(&view, &xs, &ys, &yaws, &model.config.local_maps(), &mut maps);
+            model.crop_inputs(&view, (&xs, &ys, &yaws), &obs, &mut maps);
             model.log_likelihoods_exact(&terms, &owner, &maps, &mut loglik, &pool);
             summaries[0][a].push(summarise(&offsets, &loglik));
             let mut set = ParticleSet::from_poses(&poses);

@@ -2,9 +2,7 @@
 //! network's log-likelihoods to the particles' log-weights, with one batched forward pass over
 //! every particle of every robot in the world.
 
-use crate::nn::pfnet::{
-    FeatureBank, FeatureCacheSpec, MapView, PfNet, PfNetConfig, Workspaces, crop_local_map_stack, depth_image,
-};
+use crate::nn::pfnet::{FeatureBank, FeatureCacheSpec, MapView, PfNet, PfNetConfig, Workspaces, depth_image};
 use crate::params::{StepParams, expect_param};
 use crate::particles::set::{
     FilterHealth, LikelihoodStats, ObservationModel, ParticleSet, record_observation,
@@ -90,11 +88,16 @@ impl StepParams for PfNetLikelihoodParams {
             "a finite number > 0",
         )?;
         let model = shared_model(self)?;
-        match (self.features, model.config.map_encoder_channels()) {
-            (MapFeatures::Cached, 2) => Err(format!(
-                "features: the checkpoint {} reads its wide view through the paper's map encoder \
-                 (two map channels); the feature cache holds encoders of one: expected `exact`",
-                self.checkpoint.as_deref().unwrap_or("(untrained)")
+        let checkpoint = self.checkpoint.as_deref().unwrap_or("(untrained)");
+        let config = &model.config;
+        match self.features {
+            MapFeatures::Cached if config.scan_on_map.is_some() => Err(format!(
+                "features: the checkpoint {checkpoint} lays the scan on its local maps (`scan_on_map`), \
+                 so its map features change with every scan and no feature bank holds them: expected `exact`"
+            )),
+            MapFeatures::Cached if config.wide_view.is_some() && !config.wide_map_encoder() => Err(format!(
+                "features: the checkpoint {checkpoint} reads its wide view through the paper's map encoder \
+                 (two map channels); the feature cache holds encoders of one: expected `exact`"
             )),
             _ => Ok(()),
         }
@@ -235,18 +238,18 @@ pub fn pfnet_likelihood(
     }
     obs_terms.resize(robot_count * model.obs_term_len(), 0.0);
     inputs.resize(particles * per_particle, 0.0);
-    let local_maps = model.config.local_maps();
     rayon::join(
         || model.observation_terms_par(obs, obs_terms, pool),
         || {
-            let mut first = 0;
+            let (mut first, mut robot_obs) = (0, obs.chunks_exact(model.obs_len()));
             for (grid, strip, on_map, set, ..) in &robots {
                 let Some(map) = weighed(grid, strip, on_map, set) else { continue };
                 let out = &mut inputs[first * per_particle..(first + set.len()) * per_particle];
                 first += set.len();
+                let obs = robot_obs.next().expect("one observation per weighed robot");
                 match params.features {
                     MapFeatures::Exact => {
-                        crop_local_map_stack(&map_view(map), &set.x, &set.y, &set.yaw, &local_maps, out)
+                        model.crop_inputs(&map_view(map), (&set.x, &set.y, &set.yaw), obs, out)
                     }
                     MapFeatures::Cached => {
                         let bank = banks.entry(on_map.0).or_insert_with(|| {
@@ -300,7 +303,7 @@ pub fn map_view(map: &NetworkMap) -> MapView<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::pfnet::{MapInput, Observation, WideView, Workspace};
+    use crate::nn::pfnet::{MapInput, Observation, ScanOnMap, WideView, Workspace};
     use crate::particles::{RecoveryBeforeUpdateParams, RecoveryState, recovery_before_update};
     use crate::sense::WideGrid;
     use crate::testing::tiny_room;
@@ -338,7 +341,7 @@ mod tests {
         let map = NetworkMap::from_fine(&tiny_room(), 0.1);
         let (xs, ys, yaws) = pose_columns();
         let mut maps = vec![0.0; 3 * model.local_map_len()];
-        crop_local_map_stack(&map_view(&map), &xs, &ys, &yaws, &model.config.local_maps(), &mut maps);
+        model.crop_inputs(&map_view(&map), (&xs, &ys, &yaws), obs, &mut maps);
         // The training path: the joint stage on concatenated features, not the system's split one.
         normalised(model.forward_steps(obs, (&maps, MapInput::LocalMaps), 1, 3, &mut Workspace::default()))
     }
@@ -421,6 +424,29 @@ mod tests {
                 "newcomers weighed like the rest: {:?} against {want:?}",
                 set.weights()
             );
+        }
+    }
+
+    #[test]
+    fn pfnet_likelihood_lays_each_robots_own_scan_on_its_particles_maps() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scan_on_map.safetensors");
+        let scan = Some(ScanOnMap { grid_extent_m: 5.0 });
+        let model = PfNet::new(PfNetConfig { scan_on_map: scan, ..PfNetConfig::compact() }, 2).unwrap();
+        model.save(&path).unwrap();
+        let checkpoint = Some(path.display().to_string());
+        let params = PfNetLikelihoodParams { checkpoint, ..Default::default() };
+        let cached = PfNetLikelihoodParams { features: MapFeatures::Cached, ..params.clone() };
+        assert!(cached.check().unwrap_err().contains("lays the scan on its local maps (`scan_on_map`)"));
+
+        let grids = [grid(0), grid(1)];
+        let (mut world, robots) = world_with_robots(&grids, MapFeatures::Exact);
+        world.insert_resource(params);
+        world.run_system_once(pfnet_likelihood).expect("system runs");
+        for (robot, grid) in robots.iter().zip(&grids) {
+            let weights = world.get::<ParticleSet>(*robot).unwrap().weights();
+            let want = expected_weights(&model, &grid.values);
+            assert!(weights.iter().zip(&want).all(|(w, e)| (w - e).abs() < 1e-5), "{weights:?} vs {want:?}");
         }
     }
 

@@ -14,7 +14,7 @@ use crate::nn::adam::{Adam, AdamConfig};
 use crate::nn::checkpoint::Checkpoint;
 use crate::nn::pfnet::{
     FeatureBank, FeatureCacheSpec, GradBuffers, LocalMapSpec, MapInput, MixtureLoss, Observation, PfNet,
-    PfNetConfig, PoseLoss, StepBatch, WideView, Workspaces, crop_local_map_stack, depth_image,
+    PfNetConfig, PoseLoss, ScanOnMap, StepBatch, WideView, Workspaces, depth_image,
 };
 use crate::params::StepParams;
 use crate::particles::{MapFeatures, TransitionParams, map_view};
@@ -132,6 +132,10 @@ pub struct TrainPfNetConfig {
     /// schedule's `local_grid` (or `data`'s) must record as its `wide_extent_m`. An `init`
     /// without it gains it at zero weight (`PfNet::with_wide_view`). Default: none.
     pub wide_view: Option<WideView>,
+    /// Beyond the paper: the scan laid on every local map as a second input channel of its map
+    /// encoder (`PfNetConfig::scan_on_map`); `features: exact` only. An `init` without it gains
+    /// it at zero weight (`PfNet::with_scan_on_map`). Default: none.
+    pub scan_on_map: Option<ScanOnMap>,
 }
 
 /// `episodes` goalnav episodes on `maps` seen apartments of shape `apartment`.
@@ -178,6 +182,7 @@ impl Default for TrainPfNetConfig {
             local_map_centred: None,
             joint_filters: None,
             wide_view: None,
+            scan_on_map: None,
         }
     }
 }
@@ -264,10 +269,13 @@ impl TrainPfNetConfig {
                  `own_map_encoder: true` or `features: exact`"
                 .into());
         }
-        if let Some(view) = self.wide_view {
-            let config = PfNetConfig::compact().with_wide_view(Some(view));
-            config.check()?;
+        if self.scan_on_map.is_some() && self.features == MapFeatures::Cached {
+            return Err("scan_on_map: the map features then change with every scan, so no feature bank \
+                        holds them: expected `features: exact`"
+                .into());
         }
+        let network = PfNetConfig { scan_on_map: self.scan_on_map, ..PfNetConfig::compact() };
+        network.observing(self.observation).with_wide_view(self.wide_view).check()?;
         PfNetConfig::named(&self.network)
             .map(|_| ())
             .ok_or_else(|| format!("network: expected `paper` or `compact`, found `{}`", self.network))
@@ -428,7 +436,6 @@ impl BatchBuffers {
         let noise = |rng: &mut _| Pose2::new(pos.sample(rng), pos.sample(rng), rot.sample(rng));
         let wide = (config.wide_fraction * k as f32).round() as usize;
         let half_box = 0.5 * config.wide_box_m;
-        let local_maps = model.config.local_maps();
         for (b, &e) in episodes.iter().enumerate() {
             let episode: &RecordedEpisode = &data.episodes[e];
             let centre = add(episode.poses[0], noise(rng));
@@ -477,10 +484,10 @@ impl BatchBuffers {
                     particles.iter().map(|p| p.yaw).collect(),
                 );
                 let out = &mut self.maps[s * k * per_particle..(s + 1) * k * per_particle];
+                let obs = &self.obs[s * model.obs_len()..(s + 1) * model.obs_len()];
                 match config.features {
                     MapFeatures::Exact => {
-                        let map = map_view(&data.maps[episode.map]);
-                        crop_local_map_stack(&map, &xs, &ys, &yaws, &local_maps, out)
+                        model.crop_inputs(&map_view(&data.maps[episode.map]), (&xs, &ys, &yaws), obs, out)
                     }
                     MapFeatures::Cached => banks[episode.map].crop_features(&xs, &ys, &yaws, out),
                 }
@@ -554,7 +561,8 @@ impl TrainState {
         let mut network = PfNetConfig::named(&config.network).expect("checked").observing(config.observation);
         network.local_map = config.local_map(network.local_map);
         network.joint_filters = config.joint_filters.unwrap_or(network.joint_filters);
-        let network = network.with_wide_view(config.wide_view);
+        let network =
+            PfNetConfig { scan_on_map: config.scan_on_map, ..network.with_wide_view(config.wide_view) };
         let model = match &config.init {
             None => PfNet::new(network, config.seed).map_err(anyhow::Error::msg)?,
             Some(path) => {
@@ -566,6 +574,9 @@ impl TrainState {
                 model.config.local_map = config.local_map(model.config.local_map);
                 if let Some(view) = config.wide_view {
                     model = model.with_wide_view(view).map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
+                }
+                if let Some(scan) = config.scan_on_map {
+                    model = model.with_scan_on_map(scan).map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
                 }
                 anyhow::ensure!(
                     model.config == network,

@@ -69,6 +69,23 @@ pub struct PfNetConfig {
     /// Beyond the paper: a zoomed-out second view, one more channel on each side (absent: the
     /// paper's one view).
     pub wide_view: Option<WideView>,
+    /// Beyond the paper: every map encoder reads the scan laid on its local map's pixels beside
+    /// the map (absent: the paper's map encoder, which sees the map alone).
+    pub scan_on_map: Option<ScanOnMap>,
+}
+
+/// The scan laid on a particle's local map (`scan_on_map.rs`): each map encoder reads, as a
+/// second input channel, the LiDAR grid resampled to its local map's pixels. The grid is the
+/// robot's and the local map the particle's, both in their own frame, so the two images agree
+/// pixel for pixel where the particle stands on the truth, and a first convolution can compare
+/// them where PF-net's encoders only meet after two stages and a pool. The price: a particle's
+/// map features then depend on the scan, so no feature bank holds them (`features: exact` only).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScanOnMap {
+    /// Side of the observation's LiDAR grid, metres: `local_grid`'s `extent_m` (paper: 5 m). A
+    /// wide view's grid spans its own `grid_extent_m`.
+    pub grid_extent_m: f32,
 }
 
 /// A second, wider view for open spaces: the particle's local map cropped again with wider
@@ -125,6 +142,7 @@ impl PfNetConfig {
             joint_filters: 8,
             layer_norm_eps: 1e-3,
             wide_view: None,
+            scan_on_map: None,
         }
     }
 
@@ -171,9 +189,16 @@ impl PfNetConfig {
         self.wide_view.is_some_and(|view| view.own_map_encoder)
     }
 
-    /// Input channels of each map encoder: every local map into the paper's, or one each.
+    /// Input channels of each map encoder: every local map into the paper's, or one each; with
+    /// `scan_on_map`, each followed by its scan.
     pub fn map_encoder_channels(&self) -> usize {
-        if self.wide_map_encoder() { 1 } else { self.map_channels }
+        let maps = if self.wide_map_encoder() { 1 } else { self.map_channels };
+        maps * self.channels_per_local_map()
+    }
+
+    /// Channels a particle's input holds per local map: the map, then its scan with `scan_on_map`.
+    pub fn channels_per_local_map(&self) -> usize {
+        1 + usize::from(self.scan_on_map.is_some())
     }
 
     /// The local maps a particle sees, one per map channel: the paper's, then the wide view's.
@@ -285,6 +310,26 @@ impl PfNetConfig {
             ));
         }
         LocalMapSpec::check_cell_m("local_map.cell_m", self.local_map.cell_m)?;
+        if let Some(scan) = self.scan_on_map {
+            if !(scan.grid_extent_m.is_finite() && scan.grid_extent_m > 0.0) {
+                return Err(format!(
+                    "scan_on_map.grid_extent_m: expected > 0 m, found {}",
+                    scan.grid_extent_m
+                ));
+            }
+            if !self.observation.uses_grid() || self.wide_view.is_some_and(|view| !view.own_map_encoder) {
+                return Err(format!(
+                    "scan_on_map: expected a network observing the LiDAR grid whose views have map \
+                     encoders of their own, found observation `{}`{}",
+                    self.observation.name(),
+                    if self.wide_view.is_some() {
+                        " and a wide view through the paper's encoder"
+                    } else {
+                        ""
+                    }
+                ));
+            }
+        }
         if self.joint_filters == 0 || !(self.layer_norm_eps > 0.0 && self.layer_norm_eps.is_finite()) {
             return Err(format!(
                 "joint_filters, layer_norm_eps: expected ≥ 1 and a finite number > 0, found {} and {}",

@@ -16,8 +16,9 @@ const POOL: MaxPool2d = MaxPool2d { kernel: 3, stride: 2, padding: Padding::Same
 
 #[derive(Clone, Debug)]
 pub struct MapEncoder {
-    /// The channels of a particle's stacked local maps it reads: `first..first + channels`.
-    first: usize,
+    /// The local map it reads (0: the paper's, 1: a wide view's), through `channels` input
+    /// channels: a particle's input holds each local map's channels in turn.
+    view: usize,
     channels: usize,
     side: usize,
     convs1: Branches,
@@ -47,12 +48,12 @@ pub struct MapActivations {
 }
 
 impl MapEncoder {
-    /// An encoder of the local-map channels `first..first + config.map_encoder_channels()`,
+    /// An encoder of `config.map_encoder_channels()` input channels from local map `view` on,
     /// its parameters named `{prefix}_c…`, `{prefix}_ln1`, `{prefix}2_c…`, `{prefix}_ln2`.
     pub fn new(
         params: &mut Params,
         config: &PfNetConfig,
-        (prefix, first): (&str, usize),
+        (prefix, view): (&str, usize),
         rng: &mut impl Rng,
     ) -> Self {
         let (channels, eps) = (config.map_encoder_channels(), config.layer_norm_eps);
@@ -60,13 +61,13 @@ impl MapEncoder {
         let norm1 = NormRelu::new(params, &format!("{prefix}_ln1"), convs1.channels, eps);
         let convs2 = Branches::new(params, &format!("{prefix}2"), convs1.channels, &config.map_stage2, rng);
         let norm2 = NormRelu::new(params, &format!("{prefix}_ln2"), convs2.channels, eps);
-        Self { first, channels, side: config.local_map.cells, convs1, norm1, convs2, norm2 }
+        Self { view, channels, side: config.local_map.cells, convs1, norm1, convs2, norm2 }
     }
 
-    /// Particle i's input: its channels of the i-th stack of local maps in `maps`.
+    /// Particle i's input: its channels of the i-th particle's input in `maps`.
     fn input<'a>(&self, maps: &'a [f32], n: usize, i: usize) -> &'a [f32] {
         let (stack, pixels) = (maps.len() / n.max(1), self.side * self.side);
-        &maps[i * stack + self.first * pixels..][..self.channels * pixels]
+        &maps[i * stack + self.view * self.channels * pixels..][..self.channels * pixels]
     }
 
     /// Channels × pixels of one particle's features.

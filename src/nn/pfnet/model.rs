@@ -104,9 +104,11 @@ impl PfNet {
         ParamCounts { map_encoder, obs_encoder, joint, total: self.params.len() }
     }
 
-    /// Values of one local map, one observation, one particle's map features, one observation's features.
+    /// Values of one particle's input (its local maps, with `scan_on_map` each followed by the
+    /// scan laid on it: `crop_inputs`), one observation, one particle's map features, one
+    /// observation's features.
     pub fn local_map_len(&self) -> usize {
-        self.config.map_channels * self.config.local_map.cells.pow(2)
+        self.config.map_channels * self.config.channels_per_local_map() * self.config.local_map.cells.pow(2)
     }
     pub fn obs_len(&self) -> usize {
         self.config.obs_channels * self.config.obs_cells.pow(2)

@@ -1,11 +1,12 @@
 //! Starting a wider PF-net from a trained one: a one-sensor network as the start of a grid + depth
-//! one, and a one-view network as the start of one with a wide view. Every weight carries over;
+//! one, a one-view network as the start of one with a wide view, and one whose map encoders see
+//! the map alone as the start of one laying the scan on it. Every weight carries over;
 //! the first convolutions read the old channels with the old weights and the new channel with
 //! zeros. The widened network's likelihoods are then the old one's, whatever the new channel
 //! holds, so training starts from the trained model and can only add what the new channel tells,
 //! where a wider model trained from scratch starts over.
 
-use super::config::{PfNetConfig, WideView};
+use super::config::{PfNetConfig, ScanOnMap, WideView};
 use super::model::PfNet;
 use super::observation::Observation;
 use crate::nn::conv::widen_input_channels;
@@ -54,6 +55,21 @@ impl PfNet {
         }
     }
 
+    /// This network with the scan laid on its local maps (`ScanOnMap`): itself if it has it, else
+    /// one whose map encoders' first convolutions gain the scan's channel after each map's, at
+    /// zero weight.
+    ///
+    /// # Errors
+    /// A network with another `scan_on_map`, naming both; one that cannot read the scan there
+    /// (`PfNetConfig::check`).
+    pub fn with_scan_on_map(&self, scan: ScanOnMap) -> Result<PfNet, String> {
+        match self.config.scan_on_map {
+            Some(have) if have == scan => Ok(self.clone()),
+            Some(have) => Err(format!("a network with {have:?} cannot start one with {scan:?}")),
+            None => self.carried_into(PfNetConfig { scan_on_map: Some(scan), ..self.config.clone() }, 0),
+        }
+    }
+
     /// A fresh network of `config` holding this one's weights; where a first convolution has more
     /// input channels, the old ones sit from channel `kept_channel` on and the others are zero. A
     /// wide map encoder of its own starts as a copy of the paper one, its features reaching the
@@ -66,7 +82,10 @@ impl PfNet {
         let names: Vec<String> = wide.params.specs().map(|(_, s)| s.name.clone()).collect();
         for name in names {
             let id = wide.params.find(&name).expect("listed above");
-            let source = name.strip_prefix("mw").map_or_else(|| name.clone(), |rest| format!("m{rest}"));
+            let source = match (self.params.find(&name), name.strip_prefix("mw")) {
+                (None, Some(rest)) => format!("m{rest}"),
+                _ => name.clone(),
+            };
             let old_id = self.params.find(&source).ok_or_else(|| format!("`{source}` missing"))?;
             let (old_shape, shape) = (&self.params.spec(old_id).shape, wide.params.spec(id).shape.clone());
             let old = self.params.get(old_id);

@@ -1,0 +1,221 @@
+//! A particle's input to the map encoders: its local maps, and with `PfNetConfig::scan_on_map`
+//! the scan laid on each of them (beyond the paper, `ScanOnMap`).
+//!
+//! The LiDAR grid has the robot at its centre facing up, the local map the particle at its bottom
+//! centre (or centre) facing up, both with column 0 on the left: the same frame, so laying the
+//! grid on a local map's pixels is one fixed resampling per step, the same for every particle.
+//! Where a particle stands on the truth, the walls the scan saw then fall on the map's walls pixel
+//! for pixel.
+
+use super::model::PfNet;
+use super::spatial_transformer::{LocalMapSpec, MapView, crop_local_map_stack, crop_local_maps};
+
+/// What the grid holds where the robot did not look (`LocalGrid`: 0 occupied, 0.5 unknown, 1 free).
+const UNKNOWN: f32 = 0.5;
+
+/// Writes the LiDAR grid `grid` (`g × g` cells over `extent_m`, the layout of `LocalGrid`) onto
+/// the pixels of a local map of `spec` (`out`, cells² values): each pixel reads the grid
+/// bilinearly between cell centres at the pixel's centre; beyond the grid it reads unknown.
+///
+/// # Panics
+/// If `grid` is not square or `out.len() != spec.cells²`.
+pub fn lay_scan(grid: &[f32], extent_m: f32, spec: &LocalMapSpec, out: &mut [f32]) {
+    let g = grid.len().isqrt();
+    assert_eq!(g * g, grid.len(), "a square grid");
+    assert_eq!(out.len(), spec.cells * spec.cells, "out holds one local map");
+    let grid_cell_m = extent_m / g as f32;
+    let read = |row: isize, col: isize| match (usize::try_from(row), usize::try_from(col)) {
+        (Ok(r), Ok(c)) if r < g && c < g => grid[r * g + c],
+        _ => UNKNOWN,
+    };
+    // A point `forward`, `left` metres from the robot, in grid centre coordinates (cell (r, c)'s
+    // centre at the integers).
+    let half = g as f32 / 2.0 - 0.5;
+    for (r, row) in out.chunks_exact_mut(spec.cells).enumerate() {
+        let forward = (spec.pixels_ahead() - r as f32 - 0.5) * spec.cell_m;
+        let v = half - forward / grid_cell_m;
+        for (c, pixel) in row.iter_mut().enumerate() {
+            let left = (spec.cells as f32 / 2.0 - c as f32 - 0.5) * spec.cell_m;
+            let u = half - left / grid_cell_m;
+            let (r0, c0) = (v.floor(), u.floor());
+            let (fv, fu) = (v - r0, u - c0);
+            let (r0, c0) = (r0 as isize, c0 as isize);
+            *pixel = (1.0 - fv) * ((1.0 - fu) * read(r0, c0) + fu * read(r0, c0 + 1))
+                + fv * ((1.0 - fu) * read(r0 + 1, c0) + fu * read(r0 + 1, c0 + 1));
+        }
+    }
+}
+
+impl PfNet {
+    /// Every pose's input to the map encoders, `[k][local_map_len]`: its local maps cropped from
+    /// `map` (`PfNetConfig::local_maps`) and, with `scan_on_map`, after each the grid of `obs`
+    /// (one observation image, the one these poses are weighed against) laid on its pixels.
+    ///
+    /// # Panics
+    /// As `crop_local_map_stack`, or if `obs` is not one observation image.
+    pub fn crop_inputs(
+        &self,
+        map: &MapView,
+        (xs, ys, yaws): (&[f32], &[f32], &[f32]),
+        obs: &[f32],
+        out: &mut [f32],
+    ) {
+        let specs = self.config.local_maps();
+        let Some(scan) = self.config.scan_on_map else {
+            return crop_local_map_stack(map, xs, ys, yaws, &specs, out);
+        };
+        assert_eq!(obs.len(), self.obs_len(), "one observation image");
+        assert_eq!(out.len(), xs.len() * self.local_map_len(), "out holds poses × local_map_len values");
+        if xs.is_empty() {
+            return;
+        }
+        let (stack, pixels) = (self.local_map_len(), self.config.local_map.cells.pow(2));
+        let grid_len = self.config.obs_cells.pow(2);
+        for (view, spec) in specs.iter().enumerate() {
+            // The paper's grid is the observation's first channel, a wide view's its last.
+            let (grid, extent_m) = match (view, self.config.wide_view) {
+                (0, _) => (&obs[..grid_len], scan.grid_extent_m),
+                (_, Some(wide)) => (&obs[obs.len() - grid_len..], wide.grid_extent_m),
+                (_, None) => unreachable!("a second local map is a wide view's"),
+            };
+            let (map_at, scan_at) = (2 * view * pixels, (2 * view + 1) * pixels);
+            for (i, input) in out.chunks_exact_mut(stack).enumerate() {
+                crop_local_maps(map, &[xs[i]], &[ys[i]], &[yaws[i]], spec, &mut input[map_at..][..pixels]);
+            }
+            let (first, others) = out.split_at_mut(stack);
+            let laid = &mut first[scan_at..][..pixels];
+            lay_scan(grid, extent_m, spec, laid);
+            for input in others.chunks_exact_mut(stack) {
+                input[scan_at..][..pixels].copy_from_slice(laid);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::gradcheck::test_values;
+    use crate::nn::pfnet::{MapInput, Observation, PfNetConfig, ScanOnMap, WideView, Workspace};
+    use crate::particles::map_view;
+    use crate::sense::{LidarParams, LidarScan, LocalGridParams, RayGrid, cast_scan, rasterize_scan};
+    use crate::testing::tiny_room;
+    use crate::world::Pose2;
+    use crate::world::map::NetworkMap;
+
+    /// The 56 × 56 grid (5 m) of the noise-free scan from `pose` in the tiny room.
+    fn grid_at(pose: Pose2) -> Vec<f32> {
+        let mut scan = LidarScan::default();
+        cast_scan(&RayGrid::from_map(&tiny_room()), pose, &[], &LidarParams::default(), &mut scan);
+        let mut grid = vec![0.0; 56 * 56];
+        rasterize_scan(&scan, &LocalGridParams::default(), &mut grid);
+        grid
+    }
+
+    /// How well the scan seen from `scan_from`, laid on the local map cropped at `particle`, fits
+    /// that map: of the pixels where it shows a hit (darker than unknown: a hit fills a fraction of
+    /// a grid cell, so the grid's darkest cells are 0.2–0.3), the share within one pixel of a map
+    /// wall; of those it shows free, the share free on the map.
+    fn fit(scan_from: Pose2, particle: Pose2, spec: &LocalMapSpec) -> (f32, f32) {
+        let cells = spec.cells as isize;
+        let mut laid = vec![0.0; spec.cells.pow(2)];
+        lay_scan(&grid_at(scan_from), 5.0, spec, &mut laid);
+        let network = NetworkMap::from_fine(&tiny_room(), 0.1);
+        let mut local = vec![0.0; laid.len()];
+        crop_local_maps(&map_view(&network), &[particle.x], &[particle.y], &[particle.yaw], spec, &mut local);
+        let wall_near = |k: isize| {
+            let (r, c) = (k / cells, k % cells);
+            (-1..=1).any(|dr| {
+                (-1..=1).any(|dc| {
+                    let (r, c) = (r + dr, c + dc);
+                    (0..cells).contains(&r)
+                        && (0..cells).contains(&c)
+                        && local[(r * cells + c) as usize] < 0.5
+                })
+            })
+        };
+        let share = |pixels: Vec<isize>, fits: &dyn Fn(isize) -> bool| {
+            assert!(
+                pixels.len() >= 10,
+                "the scan should show the room in the window, found {}",
+                pixels.len()
+            );
+            pixels.iter().filter(|&&k| fits(k)).count() as f32 / pixels.len() as f32
+        };
+        let (hits, free): (Vec<isize>, Vec<isize>) = (
+            (0..cells * cells).filter(|&k| laid[k as usize] < 0.45).collect(),
+            (0..cells * cells).filter(|&k| laid[k as usize] > 0.9).collect(),
+        );
+        (share(hits, &wall_near), share(free, &|k| local[k as usize] > 0.5))
+    }
+
+    #[test]
+    fn the_scan_falls_on_the_walls_of_the_true_pose() {
+        // Turned, so that a flipped axis or a mirrored side would move the pillar off its walls.
+        let truth = Pose2::new(0.55, 0.45, 0.6);
+        for centred in [false, true] {
+            let spec = LocalMapSpec { centred, ..LocalMapSpec::default() };
+            let (hits, free) = fit(truth, truth, &spec);
+            assert!(
+                hits > 0.95 && free > 0.95,
+                "centred {centred}: {hits} of the hits on walls, {free} of the free space free"
+            );
+            for off in [Pose2::new(0.85, 0.45, 0.6), Pose2::new(0.55, 0.45, 1.1)] {
+                let shifted = fit(truth, off, &spec);
+                assert!(shifted.1 < free - 0.1, "centred {centred}: {shifted:?} at {off:?} against {free}");
+            }
+        }
+    }
+
+    /// Weights of `POSES` on a scan, from the network's own crop.
+    fn log_likelihoods(model: &PfNet, obs: &[f32]) -> Vec<f32> {
+        let network = NetworkMap::from_fine(&tiny_room(), 0.1);
+        let (xs, ys, yaws) = ([0.5, 1.2, 1.6], [0.5, 0.8, 1.1], [0.0, 1.5, -2.5]);
+        let mut maps = vec![0.0; 3 * model.local_map_len()];
+        model.crop_inputs(&map_view(&network), (&xs, &ys, &yaws), obs, &mut maps);
+        model.forward_steps(obs, (&maps, MapInput::LocalMaps), 1, 3, &mut Workspace::default()).to_vec()
+    }
+
+    #[test]
+    fn a_network_gaining_the_scan_starts_as_the_one_without() {
+        let scan = ScanOnMap { grid_extent_m: 5.0 };
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
+        for config in [PfNetConfig::compact(), PfNetConfig::compact().with_wide_view(Some(view))] {
+            let without = PfNet::new(config, 3).unwrap();
+            let mut with = without.with_scan_on_map(scan).unwrap();
+            assert_eq!(with.local_map_len(), 2 * without.local_map_len(), "a scan after each local map");
+            let obs = test_values(without.obs_len(), 5).iter().map(|v| v.abs()).collect::<Vec<_>>();
+            let (want, got) = (log_likelihoods(&without, &obs), log_likelihoods(&with, &obs));
+            for (w, g) in want.iter().zip(&got) {
+                assert!((w - g).abs() < 1e-5, "{want:?} against {got:?}");
+            }
+            // Every map encoder reads its scan once its weights there grow.
+            for prefix in ["m_c3/", "mw_c3/"].into_iter().take(without.config.map_channels) {
+                let id = with.params.find(&format!("{prefix}kernel")).unwrap();
+                let taps = 9;
+                with.params.get_mut(id)[taps] = 0.5; // output 0, input channel 1 (the scan), first tap
+                let nudged = log_likelihoods(&with, &obs);
+                assert!(nudged.iter().zip(&got).any(|(a, b)| (a - b).abs() > 1e-4), "{prefix}: {nudged:?}");
+                with.params.get_mut(id)[taps] = 0.0;
+            }
+            assert!(with.with_scan_on_map(ScanOnMap { grid_extent_m: 4.0 }).is_err(), "another grid");
+        }
+    }
+
+    #[test]
+    fn only_grid_networks_with_an_encoder_per_view_lay_the_scan() {
+        let scan = Some(ScanOnMap { grid_extent_m: 5.0 });
+        let depth = PfNetConfig { scan_on_map: scan, ..PfNetConfig::compact().observing(Observation::Depth) };
+        assert_eq!(
+            depth.check().unwrap_err(),
+            "scan_on_map: expected a network observing the LiDAR grid whose views have map encoders of \
+             their own, found observation `depth`"
+        );
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: false };
+        let shared = PfNetConfig { scan_on_map: scan, ..PfNetConfig::compact().with_wide_view(Some(view)) };
+        assert!(shared.check().unwrap_err().ends_with("and a wide view through the paper's encoder"));
+        let flat =
+            PfNetConfig { scan_on_map: Some(ScanOnMap { grid_extent_m: 0.0 }), ..PfNetConfig::compact() };
+        assert_eq!(flat.check().unwrap_err(), "scan_on_map.grid_extent_m: expected > 0 m, found 0");
+    }
+}
