@@ -167,7 +167,7 @@ mod tests {
         }
     }
 
-    /// Weights of `POSES` on a scan, from the network's own crop.
+    /// Log-likelihoods of three poses in the tiny room on the scan `obs`, from the network's own crop.
     fn log_likelihoods(model: &PfNet, obs: &[f32]) -> Vec<f32> {
         let network = NetworkMap::from_fine(&tiny_room(), 0.1);
         let (xs, ys, yaws) = ([0.5, 1.2, 1.6], [0.5, 0.8, 1.1], [0.0, 1.5, -2.5]);
