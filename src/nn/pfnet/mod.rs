@@ -27,6 +27,5 @@ pub use model::{MapInput, ParamCounts, PfNet, Workspace, is_map_encoder_param};
 pub use observation::{DEPTH_BIN_M, Observation, depth_image};
 pub use reference::{ReferenceError, VerifyReport, from_keras_layout, load_reference_model, verify};
 pub use saved::PfNetFileError;
-pub use scan_on_map::lay_scan;
 pub use spatial_transformer::{LocalMapSpec, MapView, crop_local_map_stack, crop_local_maps};
 pub use train_step::{GradBuffers, StepBatch};
