@@ -268,6 +268,22 @@ fn replay_pfnet_tracks_a_recorded_log_through_the_same_systems() {
     let cached = [&base[..], &["--localizer", "pfnet", "--features", "cached"]].concat();
     run(parse(&cached)).expect("localize --localizer pfnet --features cached runs");
 
+    // The scan-laid wide-view checkpoint gets the grids it reads and its sharper likelihood.
+    let scan_wide = "pfnet:models/pfnet_compact_scan_wide.safetensors";
+    let sharp = [&base[..], &["--localizer", scan_wide, "--likelihood-scale", "10"]].concat();
+    run(parse(&sharp)).expect("localize with the scan-laid checkpoint at scale 10 runs");
+    let estimates: Vec<EstimateLine> = std::fs::read_to_string(&est)
+        .expect("EST rewritten")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("each EST line parses"))
+        .collect();
+    let errors = position_errors(&rec.lines, &estimates);
+    let mean = errors[errors.len() / 2..].iter().sum::<f32>() / (errors.len() - errors.len() / 2) as f32;
+    assert!(
+        mean < 0.2,
+        "scan-laid PF-net tracking: mean error over the last half {mean} m; errors {errors:?}"
+    );
+
     let missing = dir.path().join("nowhere.safetensors");
     let flag = format!("pfnet:{}", missing.display());
     let err =
@@ -298,6 +314,10 @@ fn replay_cli_rejects_bad_inputs_before_work() {
 
     let err = fails(&["--particles", "0"]);
     assert!(err.contains("--particles 0"), "zero particles named: {err}");
+    let err = fails(&["--localizer", "pfnet", "--likelihood-scale", "0"]);
+    assert!(err.contains("--likelihood-scale 0") && err.contains("> 0"), "a zero scale named: {err}");
+    let err = fails(&["--likelihood-scale", "10"]);
+    assert!(err.contains("--localizer pfnet"), "a scale on the likelihood field is refused: {err}");
     let err = fails(&["--kld", "900,100"]);
     assert!(err.contains("--kld") && err.contains("MIN ≤ MAX"), "inverted --kld named: {err}");
     let err =

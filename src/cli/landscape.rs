@@ -12,7 +12,7 @@
 use crate::cli::set_threads;
 use crate::compose::NETWORK_RESOLUTION_M;
 use crate::nn::pfnet::{PfNet, Workspaces, depth_image};
-use crate::particles::{LikelihoodFieldParams, ParticleSet, add_log_likelihoods, map_view};
+use crate::particles::{LikelihoodFieldParams, ParticleSet, add_log_likelihoods, local_grid_for, map_view};
 use crate::sense::{
     DepthParams, LidarParams, LidarScan, LocalGridParams, RayGrid, cast_scan, depth_strip, rasterize_scan,
 };
@@ -143,13 +143,13 @@ fn load_scene(args: &LandscapeArgs) -> anyhow::Result<Scene> {
 fn observation(model: &PfNet, scene: &Scene, truth: Pose2, obs: &mut [f32]) -> LidarScan {
     let mut scan = LidarScan::default();
     cast_scan(&scene.rays, truth, &[], &LidarParams::default(), &mut scan);
-    let grid = LocalGridParams { out_cells: model.config.obs_cells, ..Default::default() };
+    let grid = local_grid_for(&model.config);
     let (grid_channel, depth_channel, wide_channel) = model.config.split_observation(obs);
     if let Some(channel) = grid_channel {
         rasterize_scan(&scan, &grid, channel);
     }
-    if let (Some(channel), Some(view)) = (wide_channel, model.config.wide_view) {
-        rasterize_scan(&scan, &LocalGridParams { extent_m: view.grid_extent_m, ..grid }, channel);
+    if let (Some(channel), Some(extent_m)) = (wide_channel, grid.wide_extent_m) {
+        rasterize_scan(&scan, &LocalGridParams { extent_m, ..grid }, channel);
     }
     if let Some(channel) = depth_channel {
         let params = DepthParams::default();

@@ -63,6 +63,11 @@ pub struct LocalizeArgs {
     /// of feature banks encoded once per map; faster, slightly less accurate).
     #[arg(long, value_enum, default_value = "exact")]
     pub features: MapFeatures,
+    /// PF-net's log-likelihoods multiplied by S before weighing (> 1 sharpens the belief; the
+    /// scan-laid wide-view checkpoint, models/pfnet_compact_scan_wide.safetensors, tracks the real
+    /// maps best at 10).
+    #[arg(long, value_name = "S")]
+    pub likelihood_scale: Option<f32>,
     /// Seed of the filter's random streams; the same seed gives the same estimates.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -265,6 +270,13 @@ fn start_line(filter: &Localizer, guess: InitialGuess) -> String {
 /// The filter's params from the flags; rejects `--particles 0` and α outside [0, 1].
 pub fn localizer_params(args: &LocalizeArgs) -> anyhow::Result<LocalizerParams> {
     ensure!(args.particles != Some(0), "--particles 0: expected at least 1 particle");
+    if let Some(scale) = args.likelihood_scale {
+        ensure!(scale.is_finite() && scale > 0.0, "--likelihood-scale {scale}: expected a finite factor > 0");
+        ensure!(
+            args.localizer.model == ReplayModel::Pfnet,
+            "--likelihood-scale: only PF-net's log-likelihoods are scaled (--localizer pfnet)"
+        );
+    }
     let defaults = LocalizerParams::default();
     let kld = args.kld.map(|(min_particles, max_particles)| KldParams {
         min_particles,
@@ -278,6 +290,7 @@ pub fn localizer_params(args: &LocalizeArgs) -> anyhow::Result<LocalizerParams> 
         pfnet: PfNetLikelihoodParams {
             checkpoint: Some(args.localizer.checkpoint.clone().unwrap_or_else(|| SHIPPED_PFNET.into())),
             features: args.features,
+            likelihood_scale: args.likelihood_scale.unwrap_or(defaults.pfnet.likelihood_scale),
             ..defaults.pfnet
         },
         resample: ResampleParams {

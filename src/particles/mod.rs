@@ -29,7 +29,9 @@ pub use likelihood_field::{
     BeamTerms, LIKELIHOOD_CHUNK, LOG_P_TABLE_LEN, LikelihoodFieldParams, add_log_likelihoods, beam_indices,
     mcl_likelihood_field, selected_beams, weigh_likelihood_field,
 };
-pub use pfnet::{MapFeatures, PfNetLikelihoodParams, PfNetState, map_view, pfnet_likelihood, shared_model};
+pub use pfnet::{
+    MapFeatures, PfNetLikelihoodParams, PfNetState, local_grid_for, map_view, pfnet_likelihood, shared_model,
+};
 pub use recovery::{
     RecoveryBeforeUpdateParams, RecoveryParams, RecoveryState, augmented_recovery, inject_uniform, recover,
     recovery_before_update, update_averages,

@@ -7,7 +7,7 @@ use crate::params::{StepParams, expect_param};
 use crate::particles::set::{
     FilterHealth, LikelihoodStats, ObservationModel, ParticleSet, record_observation,
 };
-use crate::sense::{DepthStrip, LocalGrid};
+use crate::sense::{DepthStrip, LocalGrid, LocalGridParams};
 use crate::world::OnMap;
 use crate::world::map::NetworkMap;
 use bevy::prelude::*;
@@ -145,6 +145,18 @@ pub struct PfNetState {
     reported_missing: bool,
 }
 
+/// The `local_grid` a network reads: a grid of its size over the window its scan is laid from
+/// (the paper's 5 m when it lays none), and the wide window of a wide view.
+pub fn local_grid_for(config: &PfNetConfig) -> LocalGridParams {
+    let defaults = LocalGridParams::default();
+    LocalGridParams {
+        out_cells: config.obs_cells,
+        extent_m: config.scan_on_map.map_or(defaults.extent_m, |scan| scan.grid_extent_m),
+        wide_extent_m: config.wide_view.map(|view| view.grid_extent_m),
+        ..defaults
+    }
+}
+
 /// What of the sensing the network observes a robot lacks, if anything.
 fn missing_input(model: &PfNet, grid: &LocalGrid, strip: Option<&DepthStrip>) -> Option<&'static str> {
     let observation = model.config.observation;
@@ -153,6 +165,15 @@ fn missing_input(model: &PfNet, grid: &LocalGrid, strip: Option<&DepthStrip>) ->
     }
     if observation.uses_depth() && strip.is_none_or(|strip| strip.depths_m.is_empty()) {
         return Some("a depth strip (the `depth` step)");
+    }
+    // The scan is laid on the local map by its metres, so a grid over another window would land
+    // every wall at the wrong distance.
+    if let Some(scan) = model.config.scan_on_map
+        && grid.extent_m != scan.grid_extent_m
+    {
+        return Some(
+            "a LiDAR grid over the window the scan is laid from (`local_grid`'s `extent_m`, the checkpoint's `scan_on_map.grid_extent_m`)",
+        );
     }
     if let Some(view) = model.config.wide_view
         && grid
@@ -318,6 +339,7 @@ mod tests {
     fn grid(seed: usize) -> LocalGrid {
         LocalGrid {
             cells: 56,
+            extent_m: 5.0,
             values: (0..56 * 56).map(|i| ((i * 7 + seed) % 3) as f32 / 2.0).collect(),
             wide: None,
         }
@@ -427,6 +449,8 @@ mod tests {
         }
     }
 
+    /// Each robot's own scan is laid on its particles' maps; a robot whose grid spans another
+    /// window than the checkpoint's is left unweighed, and the feature cache is refused by name.
     #[test]
     fn pfnet_likelihood_lays_each_robots_own_scan_on_its_particles_maps() {
         let dir = tempfile::tempdir().unwrap();
@@ -439,15 +463,18 @@ mod tests {
         let cached = PfNetLikelihoodParams { features: MapFeatures::Cached, ..params.clone() };
         assert!(cached.check().unwrap_err().contains("lays the scan on its local maps (`scan_on_map`)"));
 
-        let grids = [grid(0), grid(1)];
+        let other_window = LocalGrid { extent_m: 4.0, ..grid(2) };
+        let grids = [grid(0), grid(1), other_window];
         let (mut world, robots) = world_with_robots(&grids, MapFeatures::Exact);
         world.insert_resource(params);
         world.run_system_once(pfnet_likelihood).expect("system runs");
-        for (robot, grid) in robots.iter().zip(&grids) {
+        for (robot, grid) in robots.iter().zip(&grids[..2]) {
             let weights = world.get::<ParticleSet>(*robot).unwrap().weights();
             let want = expected_weights(&model, &grid.values);
             assert!(weights.iter().zip(&want).all(|(w, e)| (w - e).abs() < 1e-5), "{weights:?} vs {want:?}");
         }
+        let stats = world.get::<LikelihoodStats>(robots[2]).unwrap();
+        assert_eq!(stats.updates, 0, "a 4 m grid would lay the scan's walls at the wrong distance");
     }
 
     #[test]

@@ -24,7 +24,7 @@ use crate::compose::{Pipeline, map_layers, standard_registry};
 use crate::particles::{
     BeamModelParams, FilterHealth, InitParams, LikelihoodFieldParams, NeedsInit, ParticleSet,
     PfNetLikelihoodParams, PoseEstimate, ResampleParams, StartGuess, Task, TransitionParams, estimate,
-    init_particles, shared_model,
+    init_particles, local_grid_for, shared_model,
 };
 use crate::plugin::ApfnPlugin;
 use crate::replay::error::ReplayError;
@@ -135,11 +135,10 @@ impl LocalizerParams {
             }
             ReplayModel::Beam => (String::new(), format!("(\"mcl_beam_model\", {})", ron(&self.beam_model))),
             ReplayModel::Pfnet => {
-                // A network with a wide view also reads the scan over its wider window. A
-                // checkpoint that does not load is named when the schedule is checked.
-                let wide = shared_model(&self.pfnet).ok().and_then(|model| model.config.wide_view);
-                let grid =
-                    LocalGridParams { wide_extent_m: wide.map(|view| view.grid_extent_m), ..default() };
+                // The grid the network reads (a wide view's too). A checkpoint that does not
+                // load is named when the schedule is checked.
+                let model = shared_model(&self.pfnet).ok();
+                let grid = model.map_or_else(LocalGridParams::default, |model| local_grid_for(&model.config));
                 let grid = format!("(\"local_grid\", {}),", ron(&grid));
                 (grid, format!("(\"pfnet_likelihood\", {})", ron(&self.pfnet)))
             }
@@ -346,14 +345,20 @@ mod tests {
         );
     }
 
-    /// A PF-net with a wide view gets the wide grid it reads, over its own window.
+    /// A PF-net with a wide view gets the wide grid it reads, over its own window, and one laying
+    /// the scan on its maps the grid over the window it was trained with.
     #[test]
     fn localizer_feeds_a_wide_view_its_window() {
-        use crate::nn::pfnet::{PfNet, PfNetConfig, WideView};
+        use crate::nn::pfnet::{PfNet, PfNetConfig, ScanOnMap, WideView};
+        use crate::particles::LikelihoodStats;
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("wide_view.safetensors");
-        let view = WideView { map_cell_m: 0.2, grid_extent_m: 9.0, own_map_encoder: false };
-        PfNet::new(PfNetConfig::compact().with_wide_view(Some(view)), 1).unwrap().save(&path).unwrap();
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 9.0, own_map_encoder: true };
+        let config = PfNetConfig {
+            scan_on_map: Some(ScanOnMap { grid_extent_m: 4.0 }),
+            ..PfNetConfig::compact().with_wide_view(Some(view))
+        };
+        PfNet::new(config, 1).unwrap().save(&path).unwrap();
         let pfnet = PfNetLikelihoodParams { checkpoint: Some(path.display().to_string()), ..default() };
         let params = LocalizerParams { model: ReplayModel::Pfnet, pfnet, ..small_radius() };
         let guess = InitialGuess::Pose(Pose2::new(1.0, 0.7, 0.2));
@@ -361,6 +366,9 @@ mod tests {
         filter.app.update();
         let grid = filter.app.world().get::<LocalGrid>(filter.robot).unwrap();
         assert_eq!(grid.wide.as_ref().map(|wide| wide.extent_m), Some(9.0));
+        assert_eq!(grid.extent_m, 4.0);
+        let stats = filter.app.world().get::<LikelihoodStats>(filter.robot).unwrap();
+        assert_eq!(stats.updates, 1, "the network weighs the grid it was given");
     }
 
     #[test]

@@ -56,6 +56,8 @@ impl StepParams for LocalGridParams {
 #[derive(Component, Clone, Debug, Default, PartialEq)]
 pub struct LocalGrid {
     pub cells: usize,
+    /// Side of the window the scan was rasterised over, metres (`LocalGridParams::extent_m`).
+    pub extent_m: f32,
     pub values: Vec<f32>,
     /// The same scan over `LocalGridParams::wide_extent_m`, when asked for.
     pub wide: Option<WideGrid>,
@@ -176,6 +178,7 @@ fn area_weights(n_in: usize, n_out: usize) -> Vec<Vec<(usize, f32)>> {
 pub fn local_grid(params: Res<LocalGridParams>, mut robots: Query<(&LidarScan, &mut LocalGrid)>) {
     for (scan, mut grid) in robots.iter_mut() {
         grid.cells = params.out_cells;
+        grid.extent_m = params.extent_m;
         grid.values.resize(params.out_cells * params.out_cells, UNKNOWN);
         rasterize_scan(scan, &params, &mut grid.values);
         grid.wide = params.wide_extent_m.map(|extent_m| {

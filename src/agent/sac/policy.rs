@@ -352,7 +352,7 @@ mod tests {
         let config = SacAgentConfig { buffer: 10, batch: 1, learning_starts: 0, hyper: SacHyper::default() };
         let agent = world.spawn(SacAgent::new(&SacNetConfig::tiny(), config, 1, 3, 7)).id();
         let crop = BeliefCrop { cells: 5, centres: vec![], values: vec![0.5; 100] };
-        let grid = LocalGrid { cells: 5, values: vec![1.0; 25], wide: None };
+        let grid = LocalGrid { cells: 5, extent_m: 5.0, values: vec![1.0; 25], wide: None };
         let robot = spawn_robot(&mut world, crop, grid);
         // (episode step, reward of the last action, last step?)
         let frames = [
@@ -406,7 +406,7 @@ mod tests {
                 centres: vec![],
                 values: (0..100).map(|i| (i % 7) as f32 / 7.0).collect(),
             };
-            let grid = LocalGrid { cells: 5, values: vec![0.5; 25], wide: None };
+            let grid = LocalGrid { cells: 5, extent_m: 5.0, values: vec![0.5; 25], wide: None };
             let robot = spawn_robot(&mut world, crop, grid);
             if let Some(seed) = seed {
                 world.entity_mut(robot).insert(ScenarioRng::seeded(seed));
@@ -489,7 +489,11 @@ mod tests {
         world.insert_resource(EpisodeParams { steps: 3, change_maps: false });
         let agent = world.spawn(SacAgent::new(&config, agent_config, 1, 3, 7)).id();
         let crop = BeliefCrop { cells: 5, centres: vec![], values: vec![0.5; 100] };
-        let robot = spawn_robot(&mut world, crop, LocalGrid { cells: 5, values: vec![1.0; 25], wide: None });
+        let robot = spawn_robot(
+            &mut world,
+            crop,
+            LocalGrid { cells: 5, extent_m: 5.0, values: vec![1.0; 25], wide: None },
+        );
         world.entity_mut(robot).insert(Episode { index: 0, step: 1 });
         world.run_system_once(sac_policy).unwrap();
         assert!(
