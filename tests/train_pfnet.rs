@@ -291,7 +291,10 @@ fn train_pfnet_scan_on_map_starts_from_a_checkpoint_without_it() {
     let dir = tempfile::tempdir().unwrap();
     let init = PfNet::new(PfNetConfig::compact(), 5).unwrap();
     let plain = TrainPfNetConfig { init: Some(saved(&init, dir.path(), "init")), ..tiny() };
-    let laid = TrainPfNetConfig { scan_on_map: Some(ScanOnMap { grid_extent_m: 5.0 }), ..plain.clone() };
+    let laid = TrainPfNetConfig {
+        scan_on_map: Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: false }),
+        ..plain.clone()
+    };
     let [train, _] = simulate_data(&plain, |_, _| {}).unwrap();
     let pool = Workspaces::for_current_pool();
     let mut runs = vec![];

@@ -91,9 +91,10 @@ impl StepParams for PfNetLikelihoodParams {
         let checkpoint = self.checkpoint.as_deref().unwrap_or("(untrained)");
         let config = &model.config;
         match self.features {
-            MapFeatures::Cached if config.scan_on_map.is_some() => Err(format!(
-                "features: the checkpoint {checkpoint} lays the scan on its local maps (`scan_on_map`), \
-                 so its map features change with every scan and no feature bank holds them: expected `exact`"
+            MapFeatures::Cached if config.channels_per_local_map() > 1 => Err(format!(
+                "features: the checkpoint {checkpoint} lays the scan on its local maps (`scan_on_map`) as \
+                 their second channel, so its map features change with every scan and no feature bank \
+                 holds them: expected `exact` (or a checkpoint whose scan has encoders of its own)"
             )),
             MapFeatures::Cached if config.wide_view.is_some() && !config.wide_map_encoder() => Err(format!(
                 "features: the checkpoint {checkpoint} reads its wide view through the paper's map encoder \
@@ -455,7 +456,7 @@ mod tests {
     fn pfnet_likelihood_lays_each_robots_own_scan_on_its_particles_maps() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("scan_on_map.safetensors");
-        let scan = Some(ScanOnMap { grid_extent_m: 5.0 });
+        let scan = Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: false });
         let model = PfNet::new(PfNetConfig { scan_on_map: scan, ..PfNetConfig::compact() }, 2).unwrap();
         model.save(&path).unwrap();
         let checkpoint = Some(path.display().to_string());
@@ -475,6 +476,32 @@ mod tests {
         }
         let stats = world.get::<LikelihoodStats>(robots[2]).unwrap();
         assert_eq!(stats.updates, 0, "a 4 m grid would lay the scan's walls at the wrong distance");
+    }
+
+    /// A checkpoint whose laid scan has encoders of its own keeps the map features the map's, so
+    /// it weighs through the feature cache too, each robot with its own scan.
+    #[test]
+    fn pfnet_likelihood_caches_the_map_features_of_a_scan_with_its_own_encoders() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scan_encoders.safetensors");
+        let scan = Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: true });
+        let model = PfNet::new(PfNetConfig { scan_on_map: scan, ..PfNetConfig::compact() }, 2).unwrap();
+        model.save(&path).unwrap();
+        let params = PfNetLikelihoodParams {
+            checkpoint: Some(path.display().to_string()),
+            features: MapFeatures::Cached,
+            ..Default::default()
+        };
+        params.check().expect("the feature cache holds the map's features");
+        let grids = [grid(0), grid(1)];
+        let (mut world, robots) = world_with_robots(&grids, MapFeatures::Cached);
+        world.insert_resource(params.clone());
+        world.run_system_once(pfnet_likelihood).expect("system runs");
+        for (robot, grid) in robots.iter().zip(&grids) {
+            let weights = world.get::<ParticleSet>(*robot).unwrap().weights();
+            let want = expected_cached_weights(&model, &grid.values, &params.cache_spec());
+            assert!(weights.iter().zip(&want).all(|(w, e)| (w - e).abs() < 1e-5), "{weights:?} vs {want:?}");
+        }
     }
 
     #[test]

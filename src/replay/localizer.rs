@@ -355,7 +355,7 @@ mod tests {
         let path = dir.path().join("wide_view.safetensors");
         let view = WideView { map_cell_m: 0.2, grid_extent_m: 9.0, own_map_encoder: true };
         let config = PfNetConfig {
-            scan_on_map: Some(ScanOnMap { grid_extent_m: 4.0 }),
+            scan_on_map: Some(ScanOnMap { grid_extent_m: 4.0, own_encoder: false }),
             ..PfNetConfig::compact().with_wide_view(Some(view))
         };
         PfNet::new(config, 1).unwrap().save(&path).unwrap();

@@ -269,9 +269,9 @@ impl TrainPfNetConfig {
                  `own_map_encoder: true` or `features: exact`"
                 .into());
         }
-        if self.scan_on_map.is_some() && self.features == MapFeatures::Cached {
+        if self.scan_on_map.is_some_and(|scan| !scan.own_encoder) && self.features == MapFeatures::Cached {
             return Err("scan_on_map: the map features then change with every scan, so no feature bank \
-                        holds them: expected `features: exact`"
+                        holds them: expected `features: exact` or `own_encoder: true`"
                 .into());
         }
         let network = PfNetConfig { scan_on_map: self.scan_on_map, ..PfNetConfig::compact() };

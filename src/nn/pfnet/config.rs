@@ -79,13 +79,21 @@ pub struct PfNetConfig {
 /// robot's and the local map the particle's, both in their own frame, so the two images agree
 /// pixel for pixel where the particle stands on the truth, and a first convolution can compare
 /// them where PF-net's encoders only meet after two stages and a pool. The price: a particle's
-/// map features then depend on the scan, so no feature bank holds them (`features: exact` only).
+/// map features then depend on the scan, so no feature bank holds them (`features: exact` only)
+/// — unless the laid scan has an encoder of its own (`own_encoder`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScanOnMap {
     /// Side of the observation's LiDAR grid, metres: `local_grid`'s `extent_m` (paper: 5 m). A
     /// wide view's grid spans its own `grid_extent_m`.
     pub grid_extent_m: f32,
+    /// The laid scan through an encoder of its own (one per view, a map encoder's layers), whose
+    /// features join the observation's before the joint stage, aligned with the map features
+    /// pixel for pixel, instead of as a second input channel of the map encoders. The scan is
+    /// the same on every particle's pixels, so it is encoded once per step, and a particle's map
+    /// features are the map's alone: the feature cache holds them. Absent: false.
+    #[serde(default)]
+    pub own_encoder: bool,
 }
 
 /// A second, wider view for open spaces: the particle's local map cropped again with wider
@@ -196,9 +204,15 @@ impl PfNetConfig {
         maps * self.channels_per_local_map()
     }
 
-    /// Channels a particle's input holds per local map: the map, then its scan with `scan_on_map`.
+    /// Channels a particle's input holds per local map: the map, then its scan with `scan_on_map`
+    /// (unless the scan has encoders of its own).
     pub fn channels_per_local_map(&self) -> usize {
-        1 + usize::from(self.scan_on_map.is_some())
+        1 + usize::from(self.scan_on_map.is_some_and(|scan| !scan.own_encoder))
+    }
+
+    /// Whether the laid scan has encoders of its own (`ScanOnMap::own_encoder`).
+    pub fn scan_encoders(&self) -> bool {
+        self.scan_on_map.is_some_and(|scan| scan.own_encoder)
     }
 
     /// The local maps a particle sees, one per map channel: the paper's, then the wide view's.

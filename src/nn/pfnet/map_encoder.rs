@@ -48,15 +48,16 @@ pub struct MapActivations {
 }
 
 impl MapEncoder {
-    /// An encoder of `config.map_encoder_channels()` input channels from local map `view` on,
-    /// its parameters named `{prefix}_c…`, `{prefix}_ln1`, `{prefix}2_c…`, `{prefix}_ln2`.
+    /// An encoder of `channels` input channels from image `view` of a particle's input on (its
+    /// local maps: `config.map_encoder_channels()`; its laid scans: 1), its parameters named
+    /// `{prefix}_c…`, `{prefix}_ln1`, `{prefix}2_c…`, `{prefix}_ln2`.
     pub fn new(
         params: &mut Params,
         config: &PfNetConfig,
-        (prefix, view): (&str, usize),
+        (prefix, view, channels): (&str, usize, usize),
         rng: &mut impl Rng,
     ) -> Self {
-        let (channels, eps) = (config.map_encoder_channels(), config.layer_norm_eps);
+        let eps = config.layer_norm_eps;
         let convs1 = Branches::new(params, prefix, channels, &config.map_stage1, rng);
         let norm1 = NormRelu::new(params, &format!("{prefix}_ln1"), convs1.channels, eps);
         let convs2 = Branches::new(params, &format!("{prefix}2"), convs1.channels, &config.map_stage2, rng);

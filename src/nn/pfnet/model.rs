@@ -22,6 +22,9 @@ pub struct PfNet {
     /// paper encoder's.
     wide_map: Option<MapEncoder>,
     obs: ObsEncoder,
+    /// The laid scan's own encoders, one per view (`ScanOnMap::own_encoder`), their features
+    /// after the observation encoder's.
+    scans: Vec<MapEncoder>,
     joint: Joint,
 }
 
@@ -44,7 +47,20 @@ pub struct StepActivations {
     /// Both encoders' features side by side, [n][map_feature_len] (with a wide map encoder).
     map_features: Vec<f32>,
     pub obs: ObsActivations,
+    pub scan: ScanActivations,
     pub joint: JointActivations,
+}
+
+/// The scan encoders' share of a pass (`ScanOnMap::own_encoder`).
+#[derive(Clone, Debug, Default)]
+pub struct ScanActivations {
+    /// Their input, [n][views][pixels] (`lay_scans`).
+    laid: Vec<f32>,
+    encoders: Vec<MapActivations>,
+    /// The observation encoder's features, then each scan encoder's, [n][obs_feature_len].
+    features: Vec<f32>,
+    /// d loss / d features split between the observation encoder and each scan encoder.
+    grads: Vec<Vec<f32>>,
 }
 
 /// Buffers for one thread's share of the work; reused across calls (they only grow).
@@ -77,15 +93,21 @@ impl PfNet {
         config.check()?;
         let mut rng = Pcg64Mcg::seed_from_u64(seed);
         let mut params = Params::new();
-        let map = MapEncoder::new(&mut params, &config, ("m", 0), &mut rng);
-        let wide_map =
-            config.wide_map_encoder().then(|| MapEncoder::new(&mut params, &config, ("mw", 1), &mut rng));
+        let channels = config.map_encoder_channels();
+        let map = MapEncoder::new(&mut params, &config, ("m", 0, channels), &mut rng);
+        let wide_map = config
+            .wide_map_encoder()
+            .then(|| MapEncoder::new(&mut params, &config, ("mw", 1, channels), &mut rng));
         let obs = ObsEncoder::new(&mut params, &config, &mut rng);
+        let views = if config.scan_encoders() { config.map_channels } else { 0 };
+        let scans: Vec<MapEncoder> = (0..views)
+            .map(|view| MapEncoder::new(&mut params, &config, (["s", "sw"][view], view, 1), &mut rng))
+            .collect();
         let map_features = map.feature_len() + wide_map.as_ref().map_or(0, MapEncoder::feature_len);
-        let map_channels = map_features / quarter(&config);
-        let obs_channels = obs.feature_len() / quarter(&config);
+        let obs_features = obs.feature_len() + scans.iter().map(MapEncoder::feature_len).sum::<usize>();
+        let (map_channels, obs_channels) = (map_features / quarter(&config), obs_features / quarter(&config));
         let joint = Joint::new(&mut params, &config, map_channels, obs_channels, &mut rng);
-        Ok(Self { config, params, map, wide_map, obs, joint })
+        Ok(Self { config, params, map, wide_map, obs, scans, joint })
     }
 
     pub fn param_counts(&self) -> ParamCounts {
@@ -96,11 +118,8 @@ impl PfNet {
                 .map(|(_, s)| s.shape.iter().product::<usize>())
                 .sum()
         };
-        let (map_encoder, obs_encoder, joint) = (
-            count(is_map_encoder_param),
-            count(|name| name.starts_with("o_") || name.starts_with("o2_")),
-            count(|name| name.starts_with("j_")),
-        );
+        let (map_encoder, obs_encoder, joint) =
+            (count(is_map_encoder_param), count(is_observation_param), count(|name| name.starts_with("j_")));
         ParamCounts { map_encoder, obs_encoder, joint, total: self.params.len() }
     }
 
@@ -117,7 +136,7 @@ impl PfNet {
         self.map_encoders().map(MapEncoder::feature_len).sum()
     }
     pub fn obs_feature_len(&self) -> usize {
-        self.obs.feature_len()
+        self.obs.feature_len() + self.scans.iter().map(MapEncoder::feature_len).sum::<usize>()
     }
 
     /// Values of one observation's share of the joint stage (`observation_terms`).
@@ -130,9 +149,73 @@ impl PfNet {
     /// observation instead of once per particle.
     pub fn observation_terms(&self, obs: &[f32], n: usize, terms: &mut [f32], ws: &mut Workspace) {
         let acts = &mut ws.acts;
-        self.obs.forward(&self.params, obs, n, &mut acts.obs);
-        let features = &acts.obs.features[..n * self.obs_feature_len()];
+        let features = self.encode_observations(obs, n, (&mut acts.obs, &mut acts.scan));
         self.joint.observation_terms(&self.params, features, n, terms, &mut acts.joint);
+    }
+
+    /// The observation encoder, and the scan encoders on the laid scans, over `n` observations →
+    /// [n][obs_feature_len], each observation's features then its scans'.
+    fn encode_observations<'a>(
+        &self,
+        obs: &[f32],
+        n: usize,
+        (obs_acts, scan): (&'a mut ObsActivations, &'a mut ScanActivations),
+    ) -> &'a [f32] {
+        self.obs.forward(&self.params, obs, n, obs_acts);
+        let own = self.obs.feature_len();
+        if self.scans.is_empty() {
+            return &obs_acts.features[..n * own];
+        }
+        self.lay_scans(obs, n, &mut scan.laid);
+        scan.encoders.resize_with(self.scans.len(), MapActivations::default);
+        for (encoder, acts) in self.scans.iter().zip(&mut scan.encoders) {
+            encoder.forward(&self.params, &scan.laid, n, acts);
+        }
+        let len = self.obs_feature_len();
+        sized(&mut scan.features, n * len);
+        for (i, out) in scan.features.chunks_exact_mut(len).enumerate() {
+            let (head, mut rest) = out.split_at_mut(own);
+            head.copy_from_slice(&obs_acts.features[i * own..][..own]);
+            for (encoder, acts) in self.scans.iter().zip(&scan.encoders) {
+                let f = encoder.feature_len();
+                let (part, tail) = rest.split_at_mut(f);
+                part.copy_from_slice(&acts.features[i * f..][..f]);
+                rest = tail;
+            }
+        }
+        &scan.features
+    }
+
+    /// The backward of `encode_observations` from d loss / d features [n][obs_feature_len].
+    fn backward_observations(
+        &self,
+        obs: &[f32],
+        n: usize,
+        dfeatures: &[f32],
+        grads: &mut [f32],
+        (obs_acts, scan): (&mut ObsActivations, &mut ScanActivations),
+    ) {
+        let p = &self.params;
+        if self.scans.is_empty() {
+            return self.obs.backward(p, obs, n, obs_acts, dfeatures, grads);
+        }
+        let lens: Vec<usize> = std::iter::once(self.obs.feature_len())
+            .chain(self.scans.iter().map(MapEncoder::feature_len))
+            .collect();
+        scan.grads.resize_with(lens.len(), Vec::new);
+        for (part, &len) in scan.grads.iter_mut().zip(&lens) {
+            sized(part, n * len);
+        }
+        for (i, mut row) in dfeatures.chunks_exact(self.obs_feature_len()).enumerate() {
+            for (part, &len) in scan.grads.iter_mut().zip(&lens) {
+                part[i * len..][..len].copy_from_slice(&row[..len]);
+                row = &row[len..];
+            }
+        }
+        self.obs.backward(p, obs, n, obs_acts, &scan.grads[0], grads);
+        for ((encoder, acts), d) in self.scans.iter().zip(&mut scan.encoders).zip(&scan.grads[1..]) {
+            encoder.backward(p, &scan.laid, n, acts, d, grads);
+        }
     }
 
     /// local maps [n][local_map_len] → features [n][map_feature_len].
@@ -221,14 +304,13 @@ impl PfNet {
         ws: &'w mut Workspace,
     ) -> &'w [f32] {
         let (p, acts, n) = (&self.params, &mut ws.acts, steps * k);
-        self.obs.forward(p, obs, steps, &mut acts.obs);
+        let obs_features = self.encode_observations(obs, steps, (&mut acts.obs, &mut acts.scan));
         let map_features = match input {
             MapInput::LocalMaps => {
                 self.encode_maps(maps, n, (&mut acts.map, &mut acts.wide_map, &mut acts.map_features))
             }
             MapInput::Features => maps,
         };
-        let obs_features = &acts.obs.features[..steps * self.obs_feature_len()];
         self.joint.forward(
             p,
             &map_features[..n * self.map_feature_len()],
@@ -264,7 +346,7 @@ impl PfNet {
             MapInput::Features => maps,
         };
         self.joint.backward(p, map_features, (steps, k), &mut acts.joint, dloglik, grads, &mut dmap, dobs);
-        self.obs.backward(p, obs, steps, &mut acts.obs, dobs, grads);
+        self.backward_observations(obs, steps, dobs, grads, (&mut acts.obs, &mut acts.scan));
         if input == MapInput::LocalMaps {
             self.backward_maps(maps, n, &dmap, grads, ws);
         }
@@ -297,6 +379,12 @@ impl PfNet {
 /// Whether the parameter `name` belongs to a map encoder (the part `MapInput::Features` freezes).
 pub fn is_map_encoder_param(name: &str) -> bool {
     ["m_", "m2_", "mw_", "mw2_"].iter().any(|prefix| name.starts_with(prefix))
+}
+
+/// Whether the parameter `name` belongs to the observation's side: its encoder, and the laid
+/// scan's encoders.
+fn is_observation_param(name: &str) -> bool {
+    ["o_", "o2_", "s_", "s2_", "sw_", "sw2_"].iter().any(|prefix| name.starts_with(prefix))
 }
 
 /// Pixels of a feature map where the two encoders meet (paper: 14 × 14).

@@ -69,15 +69,12 @@ impl PfNet {
         if xs.is_empty() {
             return;
         }
+        if scan.own_encoder {
+            return crop_local_map_stack(map, xs, ys, yaws, &specs, out);
+        }
         let (stack, pixels) = (self.local_map_len(), self.config.local_map.cells.pow(2));
-        let grid_len = self.config.obs_cells.pow(2);
         for (view, spec) in specs.iter().enumerate() {
-            // The paper's grid is the observation's first channel, a wide view's its last.
-            let (grid, extent_m) = match (view, self.config.wide_view) {
-                (0, _) => (&obs[..grid_len], scan.grid_extent_m),
-                (_, Some(wide)) => (&obs[obs.len() - grid_len..], wide.grid_extent_m),
-                (_, None) => unreachable!("a second local map is a wide view's"),
-            };
+            let (grid, extent_m) = self.grid_of_view(obs, view);
             let (map_at, scan_at) = (2 * view * pixels, (2 * view + 1) * pixels);
             for (i, input) in out.chunks_exact_mut(stack).enumerate() {
                 crop_local_maps(map, &[xs[i]], &[ys[i]], &[yaws[i]], spec, &mut input[map_at..][..pixels]);
@@ -88,6 +85,37 @@ impl PfNet {
             for input in others.chunks_exact_mut(stack) {
                 input[scan_at..][..pixels].copy_from_slice(laid);
             }
+        }
+    }
+
+    /// The scan encoders' input (`ScanOnMap::own_encoder`): the grid of each of `n` observations
+    /// laid on every local map's pixels, `[n][views][cells²]`.
+    ///
+    /// # Panics
+    /// Without `scan_on_map`, or if `obs` is not `n` observation images.
+    pub(super) fn lay_scans(&self, obs: &[f32], n: usize, out: &mut Vec<f32>) {
+        assert!(self.config.scan_on_map.is_some(), "a network laying the scan");
+        assert_eq!(obs.len(), n * self.obs_len(), "n observation images");
+        let specs = self.config.local_maps();
+        let pixels = self.config.local_map.cells.pow(2);
+        out.resize(n * specs.len() * pixels, 0.0);
+        let laid = out.chunks_exact_mut(pixels);
+        let views =
+            obs.chunks_exact(self.obs_len()).flat_map(|one| (0..specs.len()).map(move |view| (one, view)));
+        for (out, (one, view)) in laid.zip(views) {
+            let (grid, extent_m) = self.grid_of_view(one, view);
+            lay_scan(grid, extent_m, &specs[view], out);
+        }
+    }
+
+    /// The grid of one observation image that `view`'s local map is laid with, and its extent:
+    /// the paper's grid is the observation's first channel, a wide view's its last.
+    fn grid_of_view<'a>(&self, obs: &'a [f32], view: usize) -> (&'a [f32], f32) {
+        let grid_len = self.config.obs_cells.pow(2);
+        match (view, self.config.scan_on_map, self.config.wide_view) {
+            (0, Some(scan), _) => (&obs[..grid_len], scan.grid_extent_m),
+            (_, Some(_), Some(wide)) => (&obs[obs.len() - grid_len..], wide.grid_extent_m),
+            _ => unreachable!("a scan is laid on the paper's local map and a wide view's"),
         }
     }
 }
@@ -178,7 +206,7 @@ mod tests {
 
     #[test]
     fn a_network_gaining_the_scan_starts_as_the_one_without() {
-        let scan = ScanOnMap { grid_extent_m: 5.0 };
+        let scan = ScanOnMap { grid_extent_m: 5.0, own_encoder: false };
         let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
         for config in [PfNetConfig::compact(), PfNetConfig::compact().with_wide_view(Some(view))] {
             let without = PfNet::new(config, 3).unwrap();
@@ -198,13 +226,71 @@ mod tests {
                 assert!(nudged.iter().zip(&got).any(|(a, b)| (a - b).abs() > 1e-4), "{prefix}: {nudged:?}");
                 with.params.get_mut(id)[taps] = 0.0;
             }
-            assert!(with.with_scan_on_map(ScanOnMap { grid_extent_m: 4.0 }).is_err(), "another grid");
+            assert!(
+                with.with_scan_on_map(ScanOnMap { grid_extent_m: 4.0, own_encoder: false }).is_err(),
+                "another grid"
+            );
         }
+    }
+
+    /// With encoders of its own the laid scan stays out of a particle's input, so the feature
+    /// cache can hold the map features: each view's scan encoder reads that view's grid laid on
+    /// its pixels, once per observation.
+    #[test]
+    fn a_scan_with_encoders_of_its_own_leaves_the_particles_input_to_the_map() {
+        let scan = ScanOnMap { grid_extent_m: 5.0, own_encoder: true };
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
+        for config in [PfNetConfig::compact(), PfNetConfig::compact().with_wide_view(Some(view))] {
+            let without = PfNet::new(config.clone(), 3).unwrap();
+            let mut with = PfNet::new(PfNetConfig { scan_on_map: Some(scan), ..config }, 3).unwrap();
+            let obs = test_values(2 * with.obs_len(), 5).iter().map(|v| v.abs()).collect::<Vec<_>>();
+            let network = NetworkMap::from_fine(&tiny_room(), 0.1);
+            let (xs, ys, yaws) = ([0.5, 1.2], [0.5, 0.8], [0.0, 1.5]);
+            let crop = |model: &PfNet| {
+                let mut maps = vec![0.0; 2 * model.local_map_len()];
+                model.crop_inputs(&map_view(&network), (&xs, &ys, &yaws), &obs[..model.obs_len()], &mut maps);
+                maps
+            };
+            assert_eq!(crop(&with), crop(&without), "the local maps alone");
+
+            let mut laid = Vec::new();
+            with.lay_scans(&obs, 2, &mut laid);
+            let (specs, grid_len) = (with.config.local_maps(), with.config.obs_cells.pow(2));
+            let pixels = with.config.local_map.cells.pow(2);
+            for (i, one) in obs.chunks_exact(with.obs_len()).enumerate() {
+                // The paper's grid is the first channel, a wide view's the last.
+                let grids = [(&one[..grid_len], 5.0), (&one[one.len() - grid_len..], 10.0)];
+                for (v, (spec, (grid, extent_m))) in specs.iter().zip(grids).enumerate() {
+                    let mut want = vec![0.0; pixels];
+                    lay_scan(grid, extent_m, spec, &mut want);
+                    assert_eq!(
+                        laid[(i * specs.len() + v) * pixels..][..pixels],
+                        want,
+                        "observation {i}, view {v}"
+                    );
+                }
+            }
+
+            let got = log_likelihoods(&with, &obs[..with.obs_len()]);
+            for prefix in ["s_c3/", "sw_c3/"].into_iter().take(specs.len()) {
+                let id = with.params.find(&format!("{prefix}kernel")).unwrap();
+                with.params.get_mut(id)[0] += 0.5;
+                let nudged = log_likelihoods(&with, &obs[..with.obs_len()]);
+                assert!(nudged.iter().zip(&got).any(|(a, b)| (a - b).abs() > 1e-4), "{prefix}: {nudged:?}");
+                with.params.get_mut(id)[0] -= 0.5;
+            }
+            let err = without.with_scan_on_map(scan).unwrap_err();
+            assert!(err.contains("train from scratch"), "{err}");
+        }
+        let one_view =
+            PfNet::new(PfNetConfig { scan_on_map: Some(scan), ..PfNetConfig::compact() }, 3).unwrap();
+        let err = one_view.with_wide_view(view).unwrap_err();
+        assert!(err.contains("encoders of its own"), "{err}");
     }
 
     #[test]
     fn only_grid_networks_with_an_encoder_per_view_lay_the_scan() {
-        let scan = Some(ScanOnMap { grid_extent_m: 5.0 });
+        let scan = Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: false });
         let depth = PfNetConfig { scan_on_map: scan, ..PfNetConfig::compact().observing(Observation::Depth) };
         assert_eq!(
             depth.check().unwrap_err(),
@@ -214,8 +300,10 @@ mod tests {
         let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: false };
         let shared = PfNetConfig { scan_on_map: scan, ..PfNetConfig::compact().with_wide_view(Some(view)) };
         assert!(shared.check().unwrap_err().ends_with("and a wide view through the paper's encoder"));
-        let flat =
-            PfNetConfig { scan_on_map: Some(ScanOnMap { grid_extent_m: 0.0 }), ..PfNetConfig::compact() };
+        let flat = PfNetConfig {
+            scan_on_map: Some(ScanOnMap { grid_extent_m: 0.0, own_encoder: false }),
+            ..PfNetConfig::compact()
+        };
         assert_eq!(flat.check().unwrap_err(), "scan_on_map.grid_extent_m: expected > 0 m, found 0");
     }
 }

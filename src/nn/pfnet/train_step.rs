@@ -174,7 +174,7 @@ impl PfNet {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::pfnet::{PfNetConfig, WideView, is_map_encoder_param};
+    use crate::nn::pfnet::{PfNetConfig, ScanOnMap, WideView, is_map_encoder_param};
 
     /// A tiny random batch: 6 steps × 4 particles (2 sequences of 3 unless told otherwise).
     struct TestBatch {
@@ -281,11 +281,24 @@ mod tests {
         assert_eq!(gradient(&warm), gradient(&Workspaces::for_current_pool()));
     }
 
+    /// The compact network, and one whose laid scan has encoders of its own.
+    fn with_and_without_scan_encoders() -> [PfNetConfig; 2] {
+        let scan = ScanOnMap { grid_extent_m: 5.0, own_encoder: true };
+        [PfNetConfig::compact(), PfNetConfig { scan_on_map: Some(scan), ..PfNetConfig::compact() }]
+    }
+
     #[test]
     fn features_as_input_give_the_local_maps_gradient_with_a_frozen_map_encoder() {
         // Fed the map encoder's own outputs, a `Features` batch must see the same loss and the
-        // same gradient for every weight after the encoder, and none for the encoder's weights.
-        let model = PfNet::new(PfNetConfig::compact(), 4).unwrap();
+        // same gradient for every weight after the encoder (the scan's encoders too: they are on
+        // the observation's side), and none for the encoder's weights.
+        for config in with_and_without_scan_encoders() {
+            frozen_map_encoder_keeps_the_other_gradients(config);
+        }
+    }
+
+    fn frozen_map_encoder_keeps_the_other_gradients(config: PfNetConfig) {
+        let model = PfNet::new(config, 4).unwrap();
         let data = TestBatch::new(&model);
         let pool = Workspaces::for_current_pool();
         let mut features = vec![0.0; 24 * model.map_feature_len()];
@@ -309,26 +322,39 @@ mod tests {
 
     #[test]
     fn sequence_gradient_matches_finite_differences() {
-        // The loss through accumulated weights, differentiated numerically in one head weight.
-        let model = PfNet::new(PfNetConfig::compact(), 2).unwrap();
-        let data = TestBatch::new(&model);
-        let (batch, loss) = (data.batch(3), LOSS);
-        let (mut grads, pool) = (GradBuffers::default(), Workspaces::for_current_pool());
-        model.batch_gradient(&batch, &loss, &mut grads, &pool);
-        let id = model.params.find("j_out/kernel").unwrap();
-        let at = model.params.range(id).start + 7;
-        let h = 1e-2f32;
-        let shifted = |delta: f32| {
-            let mut m = model.clone();
-            m.params.values[at] += delta;
-            m.batch_gradient(&batch, &loss, &mut GradBuffers::default(), &pool)
-        };
-        let numeric = (shifted(h) - shifted(-h)) / f64::from(2.0 * h);
-        let analytic = f64::from(grads.total[at]);
-        assert!(
-            (numeric - analytic).abs() <= 2e-2 * numeric.abs().max(1e-6),
-            "d loss / d j_out/kernel[7]: analytic {analytic:e} vs numeric {numeric:e}"
-        );
+        // The loss through accumulated weights, differentiated numerically in a head weight and
+        // in weights of the laid scan's own encoders: in each tensor, the weight of the largest
+        // gradient, so that the difference stands clear of the f32 forward's rounding. A
+        // first-stage weight moves activations across ReLU and pool switches, so its step is
+        // smaller, and that rounding then needs a wider tolerance.
+        let [plain, scan] = with_and_without_scan_encoders();
+        let weights = [
+            (plain, "j_out/kernel", 1e-2, 2e-2),
+            (scan.clone(), "s_c5/kernel", 5e-4, 3e-2),
+            (scan, "s2_c3/kernel", 5e-4, 3e-2),
+        ];
+        for (config, name, h, tolerance) in weights {
+            let model = PfNet::new(config, 2).unwrap();
+            let data = TestBatch::new(&model);
+            let (batch, loss) = (data.batch(3), LOSS);
+            let (mut grads, pool) = (GradBuffers::default(), Workspaces::for_current_pool());
+            model.batch_gradient(&batch, &loss, &mut grads, &pool);
+            let range = model.params.range(model.params.find(name).unwrap());
+            let at =
+                range.clone().max_by(|&a, &b| grads.total[a].abs().total_cmp(&grads.total[b].abs())).unwrap();
+            let shifted = |delta: f32| {
+                let mut m = model.clone();
+                m.params.values[at] += delta;
+                m.batch_gradient(&batch, &loss, &mut GradBuffers::default(), &pool)
+            };
+            let numeric = (shifted(h) - shifted(-h)) / f64::from(2.0 * h);
+            let analytic = f64::from(grads.total[at]);
+            assert!(
+                (numeric - analytic).abs() <= tolerance * numeric.abs().max(1e-6),
+                "d loss / d {name}[{}]: analytic {analytic:e} vs numeric {numeric:e}",
+                at - range.start
+            );
+        }
     }
 
     /// With a wide view of its own map encoder a particle's features are both encoders' side by

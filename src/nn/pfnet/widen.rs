@@ -51,6 +51,10 @@ impl PfNet {
             Some(have) => {
                 Err(format!("a network with the wide view {have:?} cannot start one with {view:?}"))
             }
+            None if self.config.scan_encoders() => Err(format!(
+                "a network whose laid scan has encoders of its own cannot start one with the wide view \
+                 {view:?}; expected one laying the scan on its map encoders' input, or training from scratch"
+            )),
             None => self.carried_into(self.config.clone().with_wide_view(Some(view)), 0),
         }
     }
@@ -66,6 +70,10 @@ impl PfNet {
         match self.config.scan_on_map {
             Some(have) if have == scan => Ok(self.clone()),
             Some(have) => Err(format!("a network with {have:?} cannot start one with {scan:?}")),
+            None if scan.own_encoder => Err(format!(
+                "{scan:?}: the scan's own encoders train from scratch; expected no `init`, or \
+                 `own_encoder: false` to lay the scan on the map encoders' input"
+            )),
             None => self.carried_into(PfNetConfig { scan_on_map: Some(scan), ..self.config.clone() }, 0),
         }
     }
