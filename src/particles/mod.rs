@@ -30,7 +30,8 @@ pub use likelihood_field::{
     mcl_likelihood_field, selected_beams, weigh_likelihood_field,
 };
 pub use pfnet::{
-    MapFeatures, PfNetLikelihoodParams, PfNetState, local_grid_for, map_view, pfnet_likelihood, shared_model,
+    ConvergedScale, MapFeatures, PfNetLikelihoodParams, PfNetState, local_grid_for, map_view,
+    pfnet_likelihood, shared_model,
 };
 pub use recovery::{
     RecoveryBeforeUpdateParams, RecoveryParams, RecoveryState, augmented_recovery, inject_uniform, recover,

@@ -54,6 +54,21 @@ pub struct PfNetLikelihoodParams {
     /// that loss made them; below 1 the filter trusts each scan less and keeps more hypotheses
     /// alive through resampling.
     pub likelihood_scale: f32,
+    /// Beyond the paper: another scale once a robot's belief has converged. `None`: one scale.
+    pub converged: Option<ConvergedScale>,
+}
+
+/// The scale of a converged belief's log-likelihoods: a sharper likelihood pulls a converged
+/// belief closer to the truth, but on a broad one (semi-global and global localization) it
+/// collapses the belief onto the first place that fits, so it waits for the belief to converge.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConvergedScale {
+    /// Converged: the particles' position spread before the update, √(σx² + σy²) by weight,
+    /// below this, metres.
+    pub spread_m: f32,
+    /// Multiplies the network's log-likelihoods then, instead of `likelihood_scale`.
+    pub likelihood_scale: f32,
 }
 
 impl Default for PfNetLikelihoodParams {
@@ -66,6 +81,7 @@ impl Default for PfNetLikelihoodParams {
             orientations: FeatureCacheSpec::default().orientations,
             pool_phases: FeatureCacheSpec::default().pool_phases,
             likelihood_scale: 1.0,
+            converged: None,
         }
     }
 }
@@ -74,6 +90,14 @@ impl PfNetLikelihoodParams {
     /// The feature banks `features: cached` builds.
     pub fn cache_spec(&self) -> FeatureCacheSpec {
         FeatureCacheSpec { orientations: self.orientations, pool_phases: self.pool_phases }
+    }
+
+    /// The scale of `set`'s log-likelihoods: `converged`'s once its spread is below it.
+    fn scale_for(&self, set: &ParticleSet) -> f32 {
+        match self.converged {
+            Some(converged) if set.position_spread_m() < converged.spread_m => converged.likelihood_scale,
+            _ => self.likelihood_scale,
+        }
     }
 }
 
@@ -87,6 +111,15 @@ impl StepParams for PfNetLikelihoodParams {
             "likelihood_scale",
             "a finite number > 0",
         )?;
+        if let Some(converged) = self.converged {
+            let positive = |v: f32| v.is_finite() && v > 0.0;
+            expect_param(positive(converged.spread_m), "converged.spread_m", "a finite spread > 0 m")?;
+            expect_param(
+                positive(converged.likelihood_scale),
+                "converged.likelihood_scale",
+                "a finite number > 0",
+            )?;
+        }
         let model = shared_model(self)?;
         let checkpoint = self.checkpoint.as_deref().unwrap_or("(untrained)");
         let config = &model.config;
@@ -299,9 +332,10 @@ pub fn pfnet_likelihood(
         }
         let loglik = &loglik[first..first + set.len()];
         first += set.len();
+        let scale = params.scale_for(&set);
         let outcome = set.weigh_with(|set| {
             for (w, l) in set.log_w.iter_mut().zip(loglik) {
-                *w += params.likelihood_scale * l;
+                *w += scale * l;
             }
             Ok(())
         });
@@ -504,19 +538,37 @@ mod tests {
         }
     }
 
+    /// Scaled by ½ the weights are ∝ √ the network's likelihoods; with a converged scale, the
+    /// scale of the belief's spread (`POSES` are 0.4–0.8 m from their mean).
     #[test]
     fn pfnet_likelihood_scale_tempers_the_weights() {
-        let (mut world, robots) = world_with_robots(&[grid(0)], MapFeatures::Exact);
-        world.resource_mut::<PfNetLikelihoodParams>().likelihood_scale = 0.5;
-        world.run_system_once(pfnet_likelihood).expect("system runs");
         let model =
             shared_model(&PfNetLikelihoodParams { config: "compact".into(), ..Default::default() }).unwrap();
         let full = expected_weights(&model, &grid(0).values);
-        let total: f32 = full.iter().map(|w| w.sqrt()).sum();
-        let weights = world.get::<ParticleSet>(robots[0]).unwrap().weights();
-        for (w, f) in weights.iter().zip(&full) {
-            assert!((w - f.sqrt() / total).abs() < 1e-5, "weights {weights:?} are not ∝ √{full:?}");
+        let half = |spread_m: f32, likelihood_scale: f32| PfNetLikelihoodParams {
+            likelihood_scale,
+            converged: (spread_m > 0.0)
+                .then_some(ConvergedScale { spread_m, likelihood_scale: 1.5 - likelihood_scale }),
+            ..PfNetLikelihoodParams { config: "compact".into(), ..Default::default() }
+        };
+        // No converged scale; spread above it; spread below it.
+        for params in [half(0.0, 0.5), half(0.2, 0.5), half(5.0, 1.0)] {
+            let (mut world, robots) = world_with_robots(&[grid(0)], MapFeatures::Exact);
+            params.check().expect("valid");
+            world.insert_resource(params.clone());
+            world.run_system_once(pfnet_likelihood).expect("system runs");
+            let total: f32 = full.iter().map(|w| w.sqrt()).sum();
+            let weights = world.get::<ParticleSet>(robots[0]).unwrap().weights();
+            for (w, f) in weights.iter().zip(&full) {
+                assert!(
+                    (w - f.sqrt() / total).abs() < 1e-5,
+                    "{params:?}: weights {weights:?} are not ∝ √{full:?}"
+                );
+            }
         }
+        let converged = Some(ConvergedScale { spread_m: -1.0, likelihood_scale: 2.0 });
+        let bad = PfNetLikelihoodParams { converged, ..half(0.0, 1.0) };
+        assert!(bad.check().unwrap_err().contains("converged.spread_m"), "{:?}", bad.check());
     }
 
     #[test]

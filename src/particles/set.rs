@@ -248,6 +248,20 @@ impl ParticleSet {
         Ok((self.normalise_guarded(), mean_log_likelihood))
     }
 
+    /// The weights' spread of the positions, √(σx² + σy²), metres (0 for an empty set).
+    pub fn position_spread_m(&self) -> f32 {
+        let w: Vec<f64> = self.log_w.iter().map(|&l| f64::from(l).exp()).collect();
+        let total: f64 = w.iter().sum();
+        if total <= 0.0 {
+            return 0.0;
+        }
+        let variance = |v: &[f32]| {
+            let mean = v.iter().zip(&w).map(|(&a, w)| w * f64::from(a)).sum::<f64>() / total;
+            v.iter().zip(&w).map(|(&a, w)| w * (f64::from(a) - mean).powi(2)).sum::<f64>() / total
+        };
+        (variance(&self.x) + variance(&self.y)).sqrt() as f32
+    }
+
     /// Effective sample size 1 / Σ w², in [1, N] for normalised weights (0 for an empty set).
     pub fn effective_sample_size(&self) -> f32 {
         let sum_sq: f64 = self.log_w.iter().map(|&l| (2.0 * l as f64).exp()).sum();
@@ -265,6 +279,16 @@ mod tests {
         let w = set.weights();
         assert!((w[0] - 0.5).abs() < 1e-6 && (w[1] - 0.25).abs() < 1e-6, "got {w:?}");
         assert_eq!(set.x, vec![0.0, 1.0, 2.0], "particle k sits at x = k");
+    }
+
+    #[test]
+    fn position_spread_is_the_weighted_deviation_of_the_positions() {
+        // Particles at x = 0, 1, 2 (y = 0), weighted ½, ¼, ¼: mean 0.75, variance 0.6875.
+        let set = ParticleSet::from_weights(&[2.0, 1.0, 1.0]);
+        assert!((set.position_spread_m() - 0.6875f32.sqrt()).abs() < 1e-6, "{}", set.position_spread_m());
+        let one = ParticleSet::from_poses(&[Pose2::new(3.0, -1.0, 0.5)]);
+        assert_eq!(one.position_spread_m(), 0.0);
+        assert_eq!(ParticleSet::default().position_spread_m(), 0.0);
     }
 
     #[test]
