@@ -270,8 +270,8 @@ fn replay_pfnet_tracks_a_recorded_log_through_the_same_systems() {
 
     // The scan-laid wide-view checkpoint gets the grids it reads and its sharper likelihood.
     let scan_wide = "pfnet:models/pfnet_compact_scan_wide.safetensors";
-    let sharp = [&base[..], &["--localizer", scan_wide, "--likelihood-scale", "10"]].concat();
-    run(parse(&sharp)).expect("localize with the scan-laid checkpoint at scale 10 runs");
+    let sharp = [&base[..], &["--localizer", scan_wide, "--converged-scale", "0.5,10"]].concat();
+    run(parse(&sharp)).expect("localize with the scan-laid checkpoint, sharpened once converged, runs");
     let estimates: Vec<EstimateLine> = std::fs::read_to_string(&est)
         .expect("EST rewritten")
         .lines()
@@ -318,6 +318,9 @@ fn replay_cli_rejects_bad_inputs_before_work() {
     assert!(err.contains("--likelihood-scale 0") && err.contains("> 0"), "a zero scale named: {err}");
     let err = fails(&["--likelihood-scale", "10"]);
     assert!(err.contains("--localizer pfnet"), "a scale on the likelihood field is refused: {err}");
+    let err =
+        Cli::try_parse_from([&base[..], &["--converged-scale", "0.5"]].concat()).expect_err("one value");
+    assert!(err.to_string().contains("SPREAD,SCALE"), "--converged-scale format named: {err}");
     let err = fails(&["--kld", "900,100"]);
     assert!(err.contains("--kld") && err.contains("MIN ≤ MAX"), "inverted --kld named: {err}");
     let err =

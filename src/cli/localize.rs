@@ -11,7 +11,9 @@
 
 use crate::cli::count;
 use crate::cli::progress::progress_bar;
-use crate::particles::{InitParams, KldParams, MapFeatures, PfNetLikelihoodParams, ResampleParams, Task};
+use crate::particles::{
+    ConvergedScale, InitParams, KldParams, MapFeatures, PfNetLikelihoodParams, ResampleParams, Task,
+};
 use crate::replay::bag::{BagLog, BagTopics, read_bag};
 use crate::replay::{
     EstimateLine, FIT_TOLERANCE_M, InitialGuess, Localizer, LocalizerParams, LogLine, MIN_FIT, ReplayModel,
@@ -68,6 +70,11 @@ pub struct LocalizeArgs {
     /// maps best at 10).
     #[arg(long, value_name = "S")]
     pub likelihood_scale: Option<f32>,
+    /// PF-net's log-likelihoods multiplied by SCALE instead once the belief has converged (the
+    /// particles' position spread below SPREAD metres): the passive table's setting for the
+    /// scan-laid wide-view checkpoint is 0.5,10 (sharp on a converged belief, not on a broad one).
+    #[arg(long, value_parser = parse_converged, value_name = "SPREAD,SCALE")]
+    pub converged_scale: Option<ConvergedScale>,
     /// Seed of the filter's random streams; the same seed gives the same estimates.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -272,11 +279,12 @@ pub fn localizer_params(args: &LocalizeArgs) -> anyhow::Result<LocalizerParams> 
     ensure!(args.particles != Some(0), "--particles 0: expected at least 1 particle");
     if let Some(scale) = args.likelihood_scale {
         ensure!(scale.is_finite() && scale > 0.0, "--likelihood-scale {scale}: expected a finite factor > 0");
-        ensure!(
-            args.localizer.model == ReplayModel::Pfnet,
-            "--likelihood-scale: only PF-net's log-likelihoods are scaled (--localizer pfnet)"
-        );
     }
+    ensure!(
+        args.localizer.model == ReplayModel::Pfnet
+            || (args.likelihood_scale.is_none() && args.converged_scale.is_none()),
+        "--likelihood-scale, --converged-scale: only PF-net's log-likelihoods are scaled (--localizer pfnet)"
+    );
     let defaults = LocalizerParams::default();
     let kld = args.kld.map(|(min_particles, max_particles)| KldParams {
         min_particles,
@@ -291,6 +299,7 @@ pub fn localizer_params(args: &LocalizeArgs) -> anyhow::Result<LocalizerParams> 
             checkpoint: Some(args.localizer.checkpoint.clone().unwrap_or_else(|| SHIPPED_PFNET.into())),
             features: args.features,
             likelihood_scale: args.likelihood_scale.unwrap_or(defaults.pfnet.likelihood_scale),
+            converged: args.converged_scale,
             ..defaults.pfnet
         },
         resample: ResampleParams {
@@ -359,6 +368,21 @@ fn parse_range(text: &str) -> Result<(usize, usize), String> {
     match text.split_once(',') {
         Some((min, max)) => Ok((count(min)?, count(max)?)),
         None => Err(format!("expected MIN,MAX (e.g. 500,2000), found `{text}`")),
+    }
+}
+
+/// `SPREAD,SCALE`: two finite numbers > 0 (metres, factor).
+fn parse_converged(text: &str) -> Result<ConvergedScale, String> {
+    let positive = |name: &str, s: &str| match s.trim().parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("{name}: expected a finite number > 0, found `{s}`")),
+    };
+    match text.split_once(',') {
+        Some((spread, scale)) => Ok(ConvergedScale {
+            spread_m: positive("SPREAD", spread)?,
+            likelihood_scale: positive("SCALE", scale)?,
+        }),
+        None => Err(format!("expected SPREAD,SCALE (e.g. 0.5,10), found `{text}`")),
     }
 }
 
