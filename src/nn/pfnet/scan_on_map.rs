@@ -282,6 +282,10 @@ mod tests {
             let err = without.with_scan_on_map(scan).unwrap_err();
             assert!(err.contains("train from scratch"), "{err}");
         }
+        let one_view =
+            PfNet::new(PfNetConfig { scan_on_map: Some(scan), ..PfNetConfig::compact() }, 3).unwrap();
+        let err = one_view.with_wide_view(view).unwrap_err();
+        assert!(err.contains("encoders of its own"), "{err}");
     }
 
     #[test]

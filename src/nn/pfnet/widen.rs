@@ -51,6 +51,10 @@ impl PfNet {
             Some(have) => {
                 Err(format!("a network with the wide view {have:?} cannot start one with {view:?}"))
             }
+            None if self.config.scan_encoders() => Err(format!(
+                "a network whose laid scan has encoders of its own cannot start one with the wide view \
+                 {view:?}; expected one laying the scan on its map encoders' input, or training from scratch"
+            )),
             None => self.carried_into(self.config.clone().with_wide_view(Some(view)), 0),
         }
     }
@@ -76,23 +80,19 @@ impl PfNet {
 
     /// A fresh network of `config` holding this one's weights; where a first convolution has more
     /// input channels, the old ones sit from channel `kept_channel` on and the others are zero. A
-    /// wide map encoder of its own starts as a copy of the paper one (and a wide view's scan
-    /// encoder as a copy of the paper view's), its features reaching the joint stage through zero
-    /// weights.
+    /// wide map encoder of its own starts as a copy of the paper one, its features reaching the
+    /// joint stage through zero weights.
     fn carried_into(&self, config: PfNetConfig, kept_channel: usize) -> Result<PfNet, String> {
         let mut wide = PfNet::new(config, 0)?;
         let quarter = (self.config.local_map.cells / 2).pow(2);
         let joint_channels = |net: &PfNet| (net.map_feature_len() + net.obs_feature_len()) / quarter;
         let (c_old, c_new) = (joint_channels(self), joint_channels(&wide));
-        let (map_old, map_new) = (self.map_feature_len() / quarter, wide.map_feature_len() / quarter);
         let names: Vec<String> = wide.params.specs().map(|(_, s)| s.name.clone()).collect();
         for name in names {
             let id = wide.params.find(&name).expect("listed above");
-            let copied =
-                |prefix: &str| name.strip_prefix(prefix).map(|rest| format!("{}{rest}", &prefix[..1]));
-            let source = match self.params.find(&name) {
-                None => copied("mw").or_else(|| copied("sw")).unwrap_or_else(|| name.clone()),
-                Some(_) => name.clone(),
+            let source = match (self.params.find(&name), name.strip_prefix("mw")) {
+                (None, Some(rest)) => format!("m{rest}"),
+                _ => name.clone(),
             };
             let old_id = self.params.find(&source).ok_or_else(|| format!("`{source}` missing"))?;
             let (old_shape, shape) = (&self.params.spec(old_id).shape, wide.params.spec(id).shape.clone());
@@ -110,7 +110,7 @@ impl PfNet {
                 && old_shape.len() == shape.len()
                 && old_patch * c_new == patch * c_old
             {
-                widen_joint_channels(old, new, (c_old, c_new), (map_old, map_new));
+                widen_joint_map_channels(old, new, (c_old, c_new), self.map_feature_len() / quarter);
             } else {
                 return Err(format!("`{name}`: shape {old_shape:?} does not widen to {shape:?}"));
             }
@@ -120,19 +120,13 @@ impl PfNet {
 }
 
 /// A locally-connected kernel whose patches (`(kh, kw, c)`, `c_old` channels, map features
-/// first, then the observation's) gain channels: map channels after the old `map_old` (up to
-/// `map_new`), and observation channels after the old ones (a scan encoder's). Old map channels
-/// stay, old observation channels move up by map_new − map_old, and the new ones are zero.
-fn widen_joint_channels(
-    old: &[f32],
-    new: &mut [f32],
-    (c_old, c_new): (usize, usize),
-    (map_old, map_new): (usize, usize),
-) {
+/// first) gain map channels: old channel c < `map` stays c, the rest move up by c_new − c_old,
+/// and the channels in between are zero.
+fn widen_joint_map_channels(old: &[f32], new: &mut [f32], (c_old, c_new): (usize, usize), map: usize) {
     new.fill(0.0);
     for (old, new) in old.chunks_exact(c_old).zip(new.chunks_exact_mut(c_new)) {
-        new[..map_old].copy_from_slice(&old[..map_old]);
-        new[map_new..][..c_old - map_old].copy_from_slice(&old[map_old..]);
+        new[..map].copy_from_slice(&old[..map]);
+        new[map + c_new - c_old..].copy_from_slice(&old[map..]);
     }
 }
 
@@ -220,29 +214,19 @@ mod tests {
         assert!(e.contains("with a wide view cannot start"), "{e}");
     }
 
-    /// A wide map encoder of its own starts as a copy of the paper one and unheard (and so does a
-    /// wide view's scan encoder, where the scan has encoders of its own): the widened network
-    /// scores every particle as the one-view one (to rounding); its joint weights then reach them.
+    /// A wide map encoder of its own starts as a copy of the paper one and unheard: the widened
+    /// network scores every particle as the one-view one (to rounding); its joint weights then
+    /// reach them.
     #[test]
     fn a_wide_map_encoder_starts_as_a_silent_copy() {
-        let scan = ScanOnMap { grid_extent_m: 5.0, own_encoder: true };
-        let compact = PfNetConfig::named("compact").unwrap();
-        for config in [compact.clone(), PfNetConfig { scan_on_map: Some(scan), ..compact }] {
-            wide_encoders_start_as_silent_copies(config);
-        }
-    }
-
-    fn wide_encoders_start_as_silent_copies(config: PfNetConfig) {
-        let narrow = PfNet::new(config, 3).unwrap();
+        let narrow = PfNet::new(PfNetConfig::named("compact").unwrap(), 3).unwrap();
         let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
         let mut wide = narrow.with_wide_view(view).unwrap();
         assert_eq!((wide.config.map_channels, wide.config.obs_channels), (2, 2));
         assert_eq!(wide.map_feature_len(), 2 * narrow.map_feature_len());
-        let scan_encoders = narrow.config.scan_encoders();
-        let copies =
-            [("m_c3/kernel", "mw_c3/kernel"), ("m2_c5/bias", "mw2_c5/bias"), ("m_ln2/gamma", "mw_ln2/gamma")];
-        let scan_copies = [("s_c5/kernel", "sw_c5/kernel"), ("s_ln1/beta", "sw_ln1/beta")];
-        for (name, copy) in copies.into_iter().chain(scan_copies.into_iter().filter(|_| scan_encoders)) {
+        for (name, copy) in
+            [("m_c3/kernel", "mw_c3/kernel"), ("m2_c5/bias", "mw2_c5/bias"), ("m_ln2/gamma", "mw_ln2/gamma")]
+        {
             let (a, b) = (narrow.params.find(name).unwrap(), wide.params.find(copy).unwrap());
             assert_eq!(narrow.params.get(a), wide.params.get(b), "{copy} starts as {name}");
         }
@@ -262,25 +246,16 @@ mod tests {
             "zero joint weights on the wide features: the one-view likelihoods, {got:?} against {want:?}"
         );
 
-        // Every tap's wide-feature channels (after the fine ones) of the 3 × 3 layer, then the
-        // wide scan encoder's (the last; a scan encoder has a map encoder's layers).
+        // Every tap's wide-feature channels (after the 4 fine ones) of the 3 × 3 layer.
         let quarter = (narrow.config.local_map.cells / 2).pow(2);
         let (fine, channels) =
             (narrow.map_feature_len() / quarter, (wide.map_feature_len() + wide.obs_feature_len()) / quarter);
         let id = wide.params.find("j_lc3/kernel").unwrap();
-        let mut nudged = |range: std::ops::Range<usize>| {
-            let kept = wide.params.get(id).to_vec();
-            for tap in wide.params.get_mut(id).chunks_exact_mut(channels) {
-                tap[range.clone()].fill(0.1);
-            }
-            let changed =
-                wide.forward_steps(&wide_obs, (&wide_maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
-            wide.params.get_mut(id).copy_from_slice(&kept);
-            changed
-        };
-        assert_ne!(nudged(fine..2 * fine), want, "the wide encoder's features reach the likelihoods");
-        if scan_encoders {
-            assert_ne!(nudged(channels - fine..channels), want, "so do the wide scan encoder's");
+        for tap in wide.params.get_mut(id).chunks_exact_mut(channels) {
+            tap[fine..2 * fine].fill(0.1);
         }
+        let changed =
+            wide.forward_steps(&wide_obs, (&wide_maps, MapInput::LocalMaps), 1, k, &mut ws).to_vec();
+        assert_ne!(changed, want, "the wide encoder's features reach the likelihoods");
     }
 }
