@@ -1,5 +1,6 @@
 //! A particle's input to the map encoders: its local maps, and with `PfNetConfig::scan_on_map`
-//! the scan laid on each of them (beyond the paper, `ScanOnMap`).
+//! the scan laid on each of them (beyond the paper, `ScanOnMap`); or, when the laid scan has
+//! encoders of its own, their input, once per observation (`lay_scans`).
 //!
 //! The LiDAR grid has the robot at its centre facing up, the local map the particle at its bottom
 //! centre (or centre) facing up, both with column 0 on the left: the same frame, so laying the
