@@ -249,15 +249,16 @@ impl ParticleSet {
     }
 
     /// The weights' spread of the positions, √(σx² + σy²), metres (0 for an empty set).
+    /// Allocates nothing: the filter asks it every step.
     pub fn position_spread_m(&self) -> f32 {
-        let w: Vec<f64> = self.log_w.iter().map(|&l| f64::from(l).exp()).collect();
-        let total: f64 = w.iter().sum();
+        let weights = || self.log_w.iter().map(|&l| f64::from(l).exp());
+        let total: f64 = weights().sum();
         if total <= 0.0 {
             return 0.0;
         }
         let variance = |v: &[f32]| {
-            let mean = v.iter().zip(&w).map(|(&a, w)| w * f64::from(a)).sum::<f64>() / total;
-            v.iter().zip(&w).map(|(&a, w)| w * (f64::from(a) - mean).powi(2)).sum::<f64>() / total
+            let mean = v.iter().zip(weights()).map(|(&a, w)| w * f64::from(a)).sum::<f64>() / total;
+            v.iter().zip(weights()).map(|(&a, w)| w * (f64::from(a) - mean).powi(2)).sum::<f64>() / total
         };
         (variance(&self.x) + variance(&self.y)).sqrt() as f32
     }
