@@ -484,16 +484,22 @@ mod tests {
         }
     }
 
+    /// A compact network laying the 5 m scan on its local maps (through encoders of its own or
+    /// not), saved in `dir`, and its checkpoint path.
+    fn saved_scan_network(dir: &Path, own_encoder: bool) -> (PfNet, Option<String>) {
+        let path = dir.join("scan_on_map.safetensors");
+        let scan = Some(ScanOnMap { grid_extent_m: 5.0, own_encoder });
+        let model = PfNet::new(PfNetConfig { scan_on_map: scan, ..PfNetConfig::compact() }, 2).unwrap();
+        model.save(&path).unwrap();
+        (model, Some(path.display().to_string()))
+    }
+
     /// Each robot's own scan is laid on its particles' maps; a robot whose grid spans another
     /// window than the checkpoint's is left unweighed, and the feature cache is refused by name.
     #[test]
     fn pfnet_likelihood_lays_each_robots_own_scan_on_its_particles_maps() {
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("scan_on_map.safetensors");
-        let scan = Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: false });
-        let model = PfNet::new(PfNetConfig { scan_on_map: scan, ..PfNetConfig::compact() }, 2).unwrap();
-        model.save(&path).unwrap();
-        let checkpoint = Some(path.display().to_string());
+        let (model, checkpoint) = saved_scan_network(dir.path(), false);
         let params = PfNetLikelihoodParams { checkpoint, ..Default::default() };
         let cached = PfNetLikelihoodParams { features: MapFeatures::Cached, ..params.clone() };
         assert!(cached.check().unwrap_err().contains("lays the scan on its local maps (`scan_on_map`)"));
@@ -517,15 +523,9 @@ mod tests {
     #[test]
     fn pfnet_likelihood_caches_the_map_features_of_a_scan_with_its_own_encoders() {
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("scan_encoders.safetensors");
-        let scan = Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: true });
-        let model = PfNet::new(PfNetConfig { scan_on_map: scan, ..PfNetConfig::compact() }, 2).unwrap();
-        model.save(&path).unwrap();
-        let params = PfNetLikelihoodParams {
-            checkpoint: Some(path.display().to_string()),
-            features: MapFeatures::Cached,
-            ..Default::default()
-        };
+        let (model, checkpoint) = saved_scan_network(dir.path(), true);
+        let params =
+            PfNetLikelihoodParams { checkpoint, features: MapFeatures::Cached, ..Default::default() };
         params.check().expect("the feature cache holds the map's features");
         let grids = [grid(0), grid(1)];
         let (mut world, robots) = world_with_robots(&grids, MapFeatures::Cached);
