@@ -22,7 +22,7 @@ use std::time::Instant;
 pub enum PfNetCommand {
     /// Parameter counts per part and in total.
     Info {
-        /// `paper`, `compact`, or a RON file holding a `PfNetConfig`.
+        /// `paper`, `compact`, a checkpoint (`.safetensors`) or a RON file holding a `PfNetConfig`.
         #[arg(long, default_value = "paper")]
         config: String,
     },
@@ -58,7 +58,8 @@ pub struct BenchArgs {
     /// Particles per filter step (with `--train`: per sequence step).
     #[arg(long, default_value_t = 3000)]
     pub particles: usize,
-    /// `paper`, `compact`, or a RON file holding a `PfNetConfig`.
+    /// `paper`, `compact`, a checkpoint (`.safetensors`: its architecture, fresh weights) or a RON
+    /// file holding a `PfNetConfig`.
     #[arg(long, default_value = "paper")]
     pub config: String,
     /// Worker threads (default: all cores).
@@ -108,12 +109,15 @@ pub fn run(cmd: PfNetCommand) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A named configuration or a RON file.
+/// A named configuration, a checkpoint's (`.safetensors`), or a RON file.
 pub fn load_config(name: &str) -> anyhow::Result<PfNetConfig> {
     if let Some(config) = PfNetConfig::named(name) {
         return Ok(config);
     }
     let path = Path::new(name);
+    if path.extension().is_some_and(|ext| ext == "safetensors") {
+        return Ok(PfNet::load(path).with_context(|| format!("--config {name}"))?.config);
+    }
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("--config {name}: expected `paper`, `compact` or a readable RON file"))?;
     let config: PfNetConfig =
@@ -190,15 +194,34 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
                 let ys: Vec<f32> = poses[k..2 * k].iter().map(|u| u * h).collect();
                 let yaws: Vec<f32> =
                     poses[2 * k..].iter().map(|u| (u - 0.5) * std::f32::consts::TAU).collect();
-                let mut features = vec![0.0; k * model.map_feature_len()];
-                time(args.reps, || {
-                    // As `pfnet_likelihood`: the observation is encoded while the crops are cut.
-                    rayon::join(
-                        || model.observation_terms_par(&obs, &mut obs_terms, &pool),
-                        || bank.crop_features(&xs, &ys, &yaws, &mut features),
-                    );
-                    model.log_likelihoods_from_features(&obs_terms, &owner, &features, &mut loglik, &pool);
-                })
+                if bank.holds_first_stage() {
+                    // A network laying the scan on its local maps: the first stage from the banks.
+                    let mut scan_terms = vec![0.0; model.scan_term_len()];
+                    let poses: Vec<[f32; 3]> = (0..k).map(|i| [xs[i], ys[i], yaws[i]]).collect();
+                    let banks = [std::sync::Arc::new(bank)];
+                    time(args.reps, || {
+                        model.observation_terms_par(&obs, &mut obs_terms, &pool);
+                        model.scan_terms_par(&obs, &mut scan_terms, &pool);
+                        let terms = (&obs_terms[..], &scan_terms[..]);
+                        model.log_likelihoods_banked(terms, &owner, (&poses, &banks), &mut loglik, &pool);
+                    })
+                } else {
+                    let mut features = vec![0.0; k * model.map_feature_len()];
+                    time(args.reps, || {
+                        // As `pfnet_likelihood`: the observation is encoded while the crops are cut.
+                        rayon::join(
+                            || model.observation_terms_par(&obs, &mut obs_terms, &pool),
+                            || bank.crop_features(&xs, &ys, &yaws, &mut features),
+                        );
+                        model.log_likelihoods_from_features(
+                            &obs_terms,
+                            &owner,
+                            &features,
+                            &mut loglik,
+                            &pool,
+                        );
+                    })
+                }
             }
         }
     };

@@ -124,11 +124,6 @@ impl StepParams for PfNetLikelihoodParams {
         let checkpoint = self.checkpoint.as_deref().unwrap_or("(untrained)");
         let config = &model.config;
         match self.features {
-            MapFeatures::Cached if config.channels_per_local_map() > 1 => Err(format!(
-                "features: the checkpoint {checkpoint} lays the scan on its local maps (`scan_on_map`) as \
-                 their second channel, so its map features change with every scan and no feature bank \
-                 holds them: expected `exact` (or a checkpoint whose scan has encoders of its own)"
-            )),
             MapFeatures::Cached if config.wide_view.is_some() && !config.wide_map_encoder() => Err(format!(
                 "features: the checkpoint {checkpoint} reads its wide view through the paper's map encoder \
                  (two map channels); the feature cache holds encoders of one: expected `exact`"
@@ -168,10 +163,15 @@ pub fn shared_model(params: &PfNetLikelihoodParams) -> Result<Arc<PfNet>, String
 pub struct PfNetState {
     model: Option<Arc<PfNet>>,
     pool: Option<Workspaces>,
-    /// Feature banks per map entity, built on first use.
+    /// Feature banks per map entity, built on first use, dropped once no robot is on the map.
     banks: HashMap<Entity, Arc<FeatureBank>>,
     obs: Vec<f32>,
     obs_terms: Vec<f32>,
+    /// With first-stage banks (a network laying the scan on its local maps): each weighed
+    /// robot's scan terms and bank, and every particle's pose.
+    scan_terms: Vec<f32>,
+    robot_banks: Vec<Arc<FeatureBank>>,
+    poses: Vec<[f32; 3]>,
     owner: Vec<u32>,
     inputs: Vec<f32>,
     loglik: Vec<f32>,
@@ -244,7 +244,9 @@ pub fn pfnet_likelihood(
         }
     }
     let model = state.model.clone().expect("loaded above");
-    let PfNetState { pool, banks, obs, obs_terms, owner, inputs, loglik, reported_missing, .. } = state;
+    let PfNetState {
+        pool, banks, obs, obs_terms, scan_terms, robot_banks, poses, owner, inputs, loglik, ..
+    } = state;
     let pool = pool.get_or_insert_with(Workspaces::for_current_pool);
     // The robots the network weighs, and their maps.
     let weighed = |grid: &LocalGrid, strip: Option<&DepthStrip>, on_map: &OnMap, set: &ParticleSet| {
@@ -253,17 +255,24 @@ pub fn pfnet_likelihood(
     };
 
     // Gather every robot's observation, then encode them while every particle's local map (or
-    // map features) is cut out: one robot's observation is one task, its particles many.
+    // map features) is cut out: one robot's observation is one task, its particles many. A
+    // network laying the scan on its local maps crops its first-stage banks inside the forward
+    // pass instead (a particle's first stage is 38 K values), from each particle's pose.
+    let first_stage = params.features == MapFeatures::Cached && model.banks_hold_first_stage();
     let per_particle = match params.features {
         MapFeatures::Exact => model.local_map_len(),
+        MapFeatures::Cached if first_stage => 0,
         MapFeatures::Cached => model.map_feature_len(),
     };
+    banks.retain(|map, _| robots.iter().any(|(_, _, on_map, ..)| on_map.0 == *map));
+    robot_banks.clear();
+    poses.clear();
     let (mut robot_count, mut particles) = (0usize, 0usize);
     obs.clear();
     owner.clear();
     for (grid, strip, on_map, set, ..) in &robots {
-        if let Some(missing) = missing_input(&model, grid, strip).filter(|_| !*reported_missing) {
-            *reported_missing = true;
+        if let Some(missing) = missing_input(&model, grid, strip).filter(|_| !state.reported_missing) {
+            state.reported_missing = true;
             tracing::warn!(
                 "pfnet_likelihood: a robot has no {missing}, which the network observes (`{}`); \
                  its particles are left unweighed",
@@ -292,9 +301,15 @@ pub fn pfnet_likelihood(
         return;
     }
     obs_terms.resize(robot_count * model.obs_term_len(), 0.0);
+    scan_terms.resize(if first_stage { robot_count * model.scan_term_len() } else { 0 }, 0.0);
     inputs.resize(particles * per_particle, 0.0);
     rayon::join(
-        || model.observation_terms_par(obs, obs_terms, pool),
+        || {
+            model.observation_terms_par(obs, obs_terms, pool);
+            if first_stage {
+                model.scan_terms_par(obs, scan_terms, pool);
+            }
+        },
         || {
             let (mut first, mut robot_obs) = (0, obs.chunks_exact(model.obs_len()));
             for (grid, strip, on_map, set, ..) in &robots {
@@ -310,7 +325,13 @@ pub fn pfnet_likelihood(
                         let bank = banks.entry(on_map.0).or_insert_with(|| {
                             Arc::new(FeatureBank::build(&model, &map_view(map), &params.cache_spec()))
                         });
-                        bank.crop_features(&set.x, &set.y, &set.yaw, out);
+                        if first_stage {
+                            robot_banks.push(bank.clone());
+                            let pose = set.x.iter().zip(&set.y).zip(&set.yaw);
+                            poses.extend(pose.map(|((&x, &y), &yaw)| [x, y, yaw]));
+                        } else {
+                            bank.crop_features(&set.x, &set.y, &set.yaw, out);
+                        }
                     }
                 }
             }
@@ -321,6 +342,9 @@ pub fn pfnet_likelihood(
     loglik.resize(particles, 0.0);
     match params.features {
         MapFeatures::Exact => model.log_likelihoods_exact(obs_terms, owner, inputs, loglik, pool),
+        MapFeatures::Cached if first_stage => {
+            model.log_likelihoods_banked((obs_terms, scan_terms), owner, (poses, robot_banks), loglik, pool)
+        }
         MapFeatures::Cached => model.log_likelihoods_from_features(obs_terms, owner, inputs, loglik, pool),
     }
 
@@ -403,12 +427,21 @@ mod tests {
         normalised(model.forward_steps(obs, (&maps, MapInput::LocalMaps), 1, 3, &mut Workspace::default()))
     }
 
-    /// `expected_weights` through the feature banks of `spec`.
+    /// `expected_weights` through the feature banks of `spec` (their first stage and `obs`'s scan
+    /// terms for a network laying the scan on its local maps).
     fn expected_cached_weights(model: &PfNet, obs: &[f32], spec: &FeatureCacheSpec) -> Vec<f32> {
         let map = NetworkMap::from_fine(&tiny_room(), 0.1);
         let (xs, ys, yaws) = pose_columns();
         let mut features = vec![0.0; 3 * model.map_feature_len()];
-        FeatureBank::build(model, &map_view(&map), spec).crop_features(&xs, &ys, &yaws, &mut features);
+        let bank = FeatureBank::build(model, &map_view(&map), spec);
+        if bank.holds_first_stage() {
+            let (mut ws, mut terms) = (Workspace::default(), vec![0.0; model.scan_term_len()]);
+            model.scan_terms(obs, &mut terms, &mut ws);
+            let poses: Vec<[f32; 3]> = POSES.iter().map(|p| [p.x, p.y, p.yaw]).collect();
+            model.encode_banked((&poses, &[0; 3]), (&[Arc::new(bank)], &terms), &mut features, &mut ws);
+        } else {
+            bank.crop_features(&xs, &ys, &yaws, &mut features);
+        }
         let features = (&features[..], MapInput::Features);
         normalised(model.forward_steps(obs, features, 1, 3, &mut Workspace::default()))
     }
@@ -495,15 +528,12 @@ mod tests {
     }
 
     /// Each robot's own scan is laid on its particles' maps; a robot whose grid spans another
-    /// window than the checkpoint's is left unweighed, and the feature cache is refused by name.
+    /// window than the checkpoint's is left unweighed.
     #[test]
     fn pfnet_likelihood_lays_each_robots_own_scan_on_its_particles_maps() {
         let dir = tempfile::tempdir().unwrap();
         let (model, checkpoint) = saved_scan_network(dir.path(), false);
         let params = PfNetLikelihoodParams { checkpoint, ..Default::default() };
-        let cached = PfNetLikelihoodParams { features: MapFeatures::Cached, ..params.clone() };
-        assert!(cached.check().unwrap_err().contains("lays the scan on its local maps (`scan_on_map`)"));
-
         let other_window = LocalGrid { extent_m: 4.0, ..grid(2) };
         let grids = [grid(0), grid(1), other_window];
         let (mut world, robots) = world_with_robots(&grids, MapFeatures::Exact);
@@ -518,23 +548,27 @@ mod tests {
         assert_eq!(stats.updates, 0, "a 4 m grid would lay the scan's walls at the wrong distance");
     }
 
-    /// A checkpoint whose laid scan has encoders of its own keeps the map features the map's, so
-    /// it weighs through the feature cache too, each robot with its own scan.
+    /// A checkpoint laying the scan on its local maps weighs through the feature cache too: with
+    /// encoders of its own for the scan the banks hold the map's features, without them its first
+    /// stage's response to the map; either way each robot with its own scan, batched as alone.
     #[test]
-    fn pfnet_likelihood_caches_the_map_features_of_a_scan_with_its_own_encoders() {
-        let dir = tempfile::tempdir().unwrap();
-        let (model, checkpoint) = saved_scan_network(dir.path(), true);
-        let params =
-            PfNetLikelihoodParams { checkpoint, features: MapFeatures::Cached, ..Default::default() };
-        params.check().expect("the feature cache holds the map's features");
-        let grids = [grid(0), grid(1)];
-        let (mut world, robots) = world_with_robots(&grids, MapFeatures::Cached);
-        world.insert_resource(params.clone());
-        world.run_system_once(pfnet_likelihood).expect("system runs");
-        for (robot, grid) in robots.iter().zip(&grids) {
-            let weights = world.get::<ParticleSet>(*robot).unwrap().weights();
-            let want = expected_cached_weights(&model, &grid.values, &params.cache_spec());
-            assert!(weights.iter().zip(&want).all(|(w, e)| (w - e).abs() < 1e-5), "{weights:?} vs {want:?}");
+    fn pfnet_likelihood_caches_what_of_a_scan_laid_network_the_map_alone_decides() {
+        for own_encoder in [true, false] {
+            let dir = tempfile::tempdir().unwrap();
+            let (model, checkpoint) = saved_scan_network(dir.path(), own_encoder);
+            let params =
+                PfNetLikelihoodParams { checkpoint, features: MapFeatures::Cached, ..Default::default() };
+            params.check().expect("the feature cache holds what the map decides");
+            let grids = [grid(0), grid(1)];
+            let (mut world, robots) = world_with_robots(&grids, MapFeatures::Cached);
+            world.insert_resource(params.clone());
+            world.run_system_once(pfnet_likelihood).expect("system runs");
+            for (robot, grid) in robots.iter().zip(&grids) {
+                let weights = world.get::<ParticleSet>(*robot).unwrap().weights();
+                let want = expected_cached_weights(&model, &grid.values, &params.cache_spec());
+                let close = weights.iter().zip(&want).all(|(w, e)| (w - e).abs() < 1e-5);
+                assert!(close, "own encoder {own_encoder}: {weights:?} vs {want:?}");
+            }
         }
     }
 

@@ -2,8 +2,10 @@
 //! rayon pool, one reusable workspace per thread, results independent of the thread count
 //! (each chunk's arithmetic is the same whichever thread runs it).
 
+use super::feature_cache::FeatureBank;
 use super::model::{PfNet, Workspace};
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::sync::Mutex;
 
 /// Particles per parallel task: enough columns for the locally-connected products to run near
@@ -78,6 +80,42 @@ impl PfNet {
                     self.encode_local_maps(sub, sub.len() / len, part, ws);
                 }
                 let owners = &owner[first..first + out.len()];
+                self.joint_log_likelihoods(&features, obs_terms, owners, out, ws);
+                ws.chunk_map_features = features;
+            });
+        });
+    }
+
+    /// Scan terms of `n` observations ([n][obs_len] → [n][scan_term_len]), one per task.
+    pub fn scan_terms_par(&self, obs: &[f32], terms: &mut [f32], pool: &Workspaces) {
+        let (len, tlen) = (self.obs_len(), self.scan_term_len());
+        terms.par_chunks_mut(tlen).zip(obs.par_chunks(len)).for_each(|(out, one)| {
+            pool.with(|ws| self.scan_terms(one, out, ws));
+        });
+    }
+
+    /// Log-likelihoods of every particle (world x, y, yaw in `poses`) from the first-stage banks
+    /// of its robot's map (`banks[owner[i]]`) and that robot's scan terms (the cached path of a
+    /// network laying the scan on its local maps), same ownership rule.
+    pub fn log_likelihoods_banked(
+        &self,
+        (obs_terms, scan_terms): (&[f32], &[f32]),
+        owner: &[u32],
+        (poses, banks): (&[[f32; 3]], &[Arc<FeatureBank>]),
+        loglik: &mut [f32],
+        pool: &Workspaces,
+    ) {
+        let flen = self.map_feature_len();
+        loglik.par_chunks_mut(PARTICLE_CHUNK).enumerate().for_each(|(c, out)| {
+            let first = c * PARTICLE_CHUNK;
+            let (poses, owners) = (&poses[first..first + out.len()], &owner[first..first + out.len()]);
+            pool.with(|ws| {
+                let mut features = std::mem::take(&mut ws.chunk_map_features);
+                features.resize(out.len() * flen, 0.0);
+                let subs = poses.chunks(MAP_ENCODER_CHUNK).zip(owners.chunks(MAP_ENCODER_CHUNK));
+                for ((poses, sub_owners), part) in subs.zip(features.chunks_mut(MAP_ENCODER_CHUNK * flen)) {
+                    self.encode_banked((poses, sub_owners), (banks, scan_terms), part, ws);
+                }
                 self.joint_log_likelihoods(&features, obs_terms, owners, out, ws);
                 ws.chunk_map_features = features;
             });

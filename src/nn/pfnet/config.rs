@@ -79,8 +79,9 @@ pub struct PfNetConfig {
 /// robot's and the local map the particle's, both in their own frame, so the two images agree
 /// pixel for pixel where the particle stands on the truth, and a first convolution can compare
 /// them where PF-net's encoders only meet after two stages and a pool. The price: a particle's
-/// map features then depend on the scan, so no feature bank holds them (`features: exact` only)
-/// — unless the laid scan has an encoder of its own (`own_encoder`).
+/// map features then depend on the scan, so no feature bank holds them; the feature cache holds
+/// the first convolution's response to the map instead (`feature_cache.rs`) — or, with an
+/// encoder of its own for the laid scan (`own_encoder`), the map features.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScanOnMap {

@@ -5,7 +5,7 @@
 //! → LayerNorm → ReLU → 14×14×8.
 
 use super::config::PfNetConfig;
-use super::stage::{Branches, NormRelu};
+use super::stage::{Branches, ChannelScratch, NormRelu};
 use crate::nn::buffers::{sized, zeroed};
 use crate::nn::conv::Padding;
 use crate::nn::params::Params;
@@ -83,6 +83,32 @@ impl MapEncoder {
     /// round-tripping through L3 for the whole chunk at every layer (standalone, LayerNorm over a
     /// chunk of 8 takes 25 µs per particle vs 47–67 µs over 128: it is bound by where the data sits).
     pub fn forward(&self, p: &Params, maps: &[f32], n: usize, acts: &mut MapActivations) {
+        let s = self.side;
+        self.forward_each(p, n, acts, |i, conv1, scratch| {
+            self.convs1.forward(p, self.input(maps, n, i), 1, (s, s), conv1, scratch);
+        });
+    }
+
+    /// `forward` with particle i's first-stage convolution output [channels][side][side] written
+    /// by `first_stage(i, out)` instead of computed from its local map (the feature cache's
+    /// first-stage banks with the scan's share added). No backward: the path is the filter's.
+    pub fn forward_from_first_stage(
+        &self,
+        p: &Params,
+        n: usize,
+        acts: &mut MapActivations,
+        mut first_stage: impl FnMut(usize, &mut [f32]),
+    ) {
+        self.forward_each(p, n, acts, |i, conv1, _| first_stage(i, conv1));
+    }
+
+    fn forward_each(
+        &self,
+        p: &Params,
+        n: usize,
+        acts: &mut MapActivations,
+        mut first_stage: impl FnMut(usize, &mut [f32], &mut Vec<f32>),
+    ) {
         let (s, h) = (self.side, self.side / 2);
         let (c1, c2) = (self.convs1.channels, self.convs2.channels);
         sized(&mut acts.conv1, n * c1 * s * s);
@@ -97,7 +123,7 @@ impl MapEncoder {
             let a = &mut *acts;
             let (big, small, pooled) = (c1 * s * s, c2 * h * h, c1 * h * h);
             let conv1 = &mut a.conv1[i * big..][..big];
-            self.convs1.forward(p, self.input(maps, n, i), 1, (s, s), conv1, &mut a.scratch);
+            first_stage(i, conv1, &mut a.scratch);
             let norm1 = &mut a.norm1[..big];
             self.norm1.forward(p, conv1, 1, s * s, norm1, &mut a.stats1[i * s * s * 2..][..s * s * 2]);
             let pooled_i = &mut a.pooled[i * pooled..][..pooled];
@@ -107,6 +133,34 @@ impl MapEncoder {
             let features = &mut a.features[i * small..][..small];
             self.norm2.forward(p, conv2, 1, h * h, features, &mut a.stats2[i * h * h * 2..][..h * h * 2]);
         }
+    }
+
+    /// Channels of the first-stage convolution's output.
+    pub fn first_stage_channels(&self) -> usize {
+        self.convs1.channels
+    }
+
+    /// Values of one particle's first-stage output, [channels][side][side].
+    pub fn first_stage_len(&self) -> usize {
+        self.convs1.channels * self.side * self.side
+    }
+
+    /// The first-stage convolution's response to input channel `channel` alone (biases added if
+    /// `with_bias`): image [h][w] → out [first_stage_channels][h][w]. With the scan laid on the
+    /// map, the map's share (channel 0) of a whole map's window goes into a feature bank once,
+    /// the scan's (channel 1, with the biases) is computed once per observation.
+    #[allow(clippy::too_many_arguments)] // inputs, which channel and bias, the output, scratch
+    pub fn first_stage_of_channel(
+        &self,
+        p: &Params,
+        channel: usize,
+        image: &[f32],
+        hw: (usize, usize),
+        with_bias: bool,
+        out: &mut [f32],
+        scratch: &mut ChannelScratch,
+    ) {
+        self.convs1.forward_input_channel(p, channel, image, hw, with_bias, out, scratch);
     }
 
     /// From d loss / d features to the weight gradients (accumulated into `grads`); the local

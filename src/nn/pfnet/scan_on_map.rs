@@ -111,7 +111,7 @@ impl PfNet {
 
     /// The grid of one observation image that `view`'s local map is laid with, and its extent:
     /// the paper's grid is the observation's first channel, a wide view's its last.
-    fn grid_of_view<'a>(&self, obs: &'a [f32], view: usize) -> (&'a [f32], f32) {
+    pub(super) fn grid_of_view<'a>(&self, obs: &'a [f32], view: usize) -> (&'a [f32], f32) {
         let grid_len = self.config.obs_cells.pow(2);
         match (view, self.config.scan_on_map, self.config.wide_view) {
             (0, Some(scan), _) => (&obs[..grid_len], scan.grid_extent_m),

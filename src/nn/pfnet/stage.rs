@@ -90,6 +90,63 @@ impl Branches {
     }
 }
 
+/// Buffers of [`Branches::forward_input_channel`]: one input channel's kernels, a zero bias, the
+/// convolution's scratch.
+#[derive(Clone, Debug, Default)]
+pub struct ChannelScratch {
+    weight: Vec<f32>,
+    bias: Vec<f32>,
+    conv: Vec<f32>,
+}
+
+impl Branches {
+    /// The branches' response to input channel `channel` alone, its biases added if `with_bias`:
+    /// x [h][w] (that channel of one image) → y [channels][h][w]. A convolution is linear in its
+    /// input, so the response to an image is the sum of its channels' responses (one of them with
+    /// the biases): a map encoder reading the map and the scan laid on it can take each apart.
+    #[allow(clippy::too_many_arguments)] // inputs, which channel and bias, the output, scratch
+    pub fn forward_input_channel(
+        &self,
+        p: &Params,
+        channel: usize,
+        x: &[f32],
+        hw: (usize, usize),
+        with_bias: bool,
+        y: &mut [f32],
+        scratch: &mut ChannelScratch,
+    ) {
+        let mut offset = 0;
+        for (conv, w, b) in &self.convs {
+            assert!(channel < conv.c_in, "input channel {channel} of {}", conv.c_in);
+            let taps = conv.kernel * conv.kernel;
+            let weight = p.get(*w);
+            scratch.weight.clear();
+            for out in 0..conv.c_out {
+                scratch.weight.extend_from_slice(&weight[(out * conv.c_in + channel) * taps..][..taps]);
+            }
+            scratch.bias.clear();
+            match with_bias {
+                true => scratch.bias.extend_from_slice(p.get(*b)),
+                false => scratch.bias.resize(conv.c_out, 0.0),
+            }
+            let one = Conv2d { c_in: 1, ..*conv };
+            one.forward(
+                &scratch.weight,
+                &scratch.bias,
+                x,
+                1,
+                hw.0,
+                hw.1,
+                y,
+                self.channels,
+                offset,
+                &mut scratch.conv,
+            );
+            offset += conv.c_out;
+        }
+    }
+}
+
 /// One image's branch output between a convolution and its max-pool: the buffer
 /// [`Branches::forward_pooled`] and [`Branches::backward_pooled`] reuse for every image and branch.
 #[derive(Clone, Debug, Default)]
@@ -275,5 +332,39 @@ mod tests {
             assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "gradient {k}: fused {a}, unfused {b}");
         }
         assert!(grads.iter().any(|&g| g != 0.0), "the test must exercise the gradients");
+    }
+
+    #[test]
+    fn a_convolution_is_the_sum_of_its_input_channels_responses() {
+        let mut rng = stream(&[6]);
+        let mut params = Params::new();
+        let stage = [
+            ConvBranch { filters: 3, kernel: 3, dilation: 1 },
+            ConvBranch { filters: 2, kernel: 7, dilation: 3 },
+        ];
+        let branches = Branches::new(&mut params, "t", 2, &stage, &mut rng);
+        for (name, value) in [("t_c3/bias", 0.3), ("t_c7d3/bias", -0.2)] {
+            let id = params.find(name).expect("branch bias");
+            params.fill(id, value);
+        }
+        let (h, w, c) = (9, 12, branches.channels);
+        let x: Vec<f32> = (0..2 * h * w).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let mut whole = vec![0.0; c * h * w];
+        branches.forward(&params, &x, 1, (h, w), &mut whole, &mut Vec::new());
+
+        let (mut first, mut second) = (vec![f32::NAN; c * h * w], vec![f32::NAN; c * h * w]);
+        let mut scratch = ChannelScratch::default();
+        branches.forward_input_channel(&params, 0, &x[..h * w], (h, w), false, &mut first, &mut scratch);
+        branches.forward_input_channel(&params, 1, &x[h * w..], (h, w), true, &mut second, &mut scratch);
+        for (k, ((a, b), want)) in first.iter().zip(&second).zip(&whole).enumerate() {
+            assert!((a + b - want).abs() < 1e-5, "output {k}: {a} + {b} against {want}");
+        }
+        // Without its biases a channel's response differs by exactly them.
+        let mut unbiased = vec![0.0; c * h * w];
+        branches.forward_input_channel(&params, 1, &x[h * w..], (h, w), false, &mut unbiased, &mut scratch);
+        assert!(
+            (second[0] - unbiased[0] - 0.3).abs() < 1e-6
+                && (second[c * h * w - 1] - unbiased[c * h * w - 1] + 0.2).abs() < 1e-6
+        );
     }
 }
