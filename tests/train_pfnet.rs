@@ -310,8 +310,23 @@ fn train_pfnet_scan_on_map_starts_from_a_checkpoint_without_it() {
     let scan_taps = model.params.get(id).chunks_exact(9).skip(1).step_by(2);
     assert!(scan_taps.flatten().any(|&w| w != 0.0), "the scan's channel learns");
 
-    let cached = TrainPfNetConfig { features: MapFeatures::Cached, ..laid };
+    let cached = TrainPfNetConfig { features: MapFeatures::Cached, ..laid.clone() };
     assert!(cached.check().unwrap_err().starts_with("scan_on_map: the map features then change"));
+
+    // With the map beyond the local map's edge the same weights train on, as a network saved
+    // with it would: the first stage reads a wider input, the loss is another.
+    let context = TrainPfNetConfig { map_context: true, ..laid.clone() };
+    let start = TrainState::new(&laid).unwrap().model;
+    let saved_with = saved(&start.with_map_context(true).unwrap(), dir.path(), "context");
+    let mut losses = vec![];
+    for config in [&context, &TrainPfNetConfig { init: Some(saved_with), ..context.clone() }] {
+        let mut state = TrainState::new(config).unwrap();
+        assert!(state.model.config.map_context && state.model.params.values == start.params.values);
+        let (mut buffers, mut grads) = (BatchBuffers::default(), GradBuffers::default());
+        losses.push(state.train_step(config, (&train, &[]), &mut buffers, &mut grads, &pool));
+    }
+    assert_eq!(losses[0], losses[1], "gained in the run or saved with it");
+    assert!((losses[0] - laid_loss).abs() > 1e-6 * laid_loss, "{losses:?} against {laid_loss}");
 }
 
 /// A one-view checkpoint starts a wide-view run: on the same episodes, the widened network's

@@ -136,6 +136,10 @@ pub struct TrainPfNetConfig {
     /// encoder (`PfNetConfig::scan_on_map`); `features: exact` only. An `init` without it gains
     /// it at zero weight (`PfNet::with_scan_on_map`). Default: none.
     pub scan_on_map: Option<ScanOnMap>,
+    /// Beyond the paper: the map encoders' first stage reads the map beyond the local map's edge
+    /// (`PfNetConfig::map_context`); an `init` without it keeps its weights (no weight depends on
+    /// it). Default: false.
+    pub map_context: bool,
 }
 
 /// `episodes` goalnav episodes on `maps` seen apartments of shape `apartment`.
@@ -183,6 +187,7 @@ impl Default for TrainPfNetConfig {
             joint_filters: None,
             wide_view: None,
             scan_on_map: None,
+            map_context: false,
         }
     }
 }
@@ -274,7 +279,11 @@ impl TrainPfNetConfig {
                         holds them: expected `features: exact` or `own_encoder: true`"
                 .into());
         }
-        let network = PfNetConfig { scan_on_map: self.scan_on_map, ..PfNetConfig::compact() };
+        let network = PfNetConfig {
+            scan_on_map: self.scan_on_map,
+            map_context: self.map_context,
+            ..PfNetConfig::compact()
+        };
         network.observing(self.observation).with_wide_view(self.wide_view).check()?;
         PfNetConfig::named(&self.network)
             .map(|_| ())
@@ -561,8 +570,11 @@ impl TrainState {
         let mut network = PfNetConfig::named(&config.network).expect("checked").observing(config.observation);
         network.local_map = config.local_map(network.local_map);
         network.joint_filters = config.joint_filters.unwrap_or(network.joint_filters);
-        let network =
-            PfNetConfig { scan_on_map: config.scan_on_map, ..network.with_wide_view(config.wide_view) };
+        let network = PfNetConfig {
+            scan_on_map: config.scan_on_map,
+            map_context: config.map_context,
+            ..network.with_wide_view(config.wide_view)
+        };
         let model = match &config.init {
             None => PfNet::new(network, config.seed).map_err(anyhow::Error::msg)?,
             Some(path) => {
@@ -578,6 +590,9 @@ impl TrainState {
                 if let Some(scan) = config.scan_on_map {
                     model = model.with_scan_on_map(scan).map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
                 }
+                model = model
+                    .with_map_context(config.map_context)
+                    .map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
                 anyhow::ensure!(
                     model.config == network,
                     "init: {path} holds another network than `network: {}` observing `{}`",

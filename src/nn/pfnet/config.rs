@@ -72,6 +72,12 @@ pub struct PfNetConfig {
     /// Beyond the paper: every map encoder reads the scan laid on its local map's pixels beside
     /// the map (absent: the paper's map encoder, which sees the map alone).
     pub scan_on_map: Option<ScanOnMap>,
+    /// Beyond the paper: the map encoders' first convolutions read the map (and the laid scan)
+    /// beyond the local map's edge, as far as they reach (`map_margin`), where the paper's see
+    /// zero padding; a particle's input is that much wider on every side, its features still the
+    /// local map's. The feature cache's banks see the map there too, so a first-stage bank holds
+    /// what the exact path computes, up to the heading residual.
+    pub map_context: bool,
 }
 
 /// The scan laid on a particle's local map (`scan_on_map.rs`): each map encoder reads, as a
@@ -154,6 +160,7 @@ impl PfNetConfig {
             layer_norm_eps: 1e-3,
             wide_view: None,
             scan_on_map: None,
+            map_context: false,
         }
     }
 
@@ -211,6 +218,20 @@ impl PfNetConfig {
     /// (unless the scan has encoders of its own).
     pub fn channels_per_local_map(&self) -> usize {
         1 + usize::from(self.scan_on_map.is_some_and(|scan| !scan.own_encoder))
+    }
+
+    /// Pixels of map a particle's input holds beyond its local map on every side: the first
+    /// stage's reach, ((kernel − 1) · dilation) / 2 at most, with `map_context`; else none.
+    pub fn map_margin(&self) -> usize {
+        match self.map_context {
+            true => self.map_stage1.iter().map(|b| (b.kernel - 1) * b.dilation / 2).max().unwrap_or(0),
+            false => 0,
+        }
+    }
+
+    /// Side of each image of a particle's input: the local map's and its margin on both sides.
+    pub fn map_input_cells(&self) -> usize {
+        self.local_map.cells + 2 * self.map_margin()
     }
 
     /// Whether the laid scan has encoders of its own (`ScanOnMap::own_encoder`).
@@ -346,6 +367,11 @@ impl PfNetConfig {
                     }
                 ));
             }
+        }
+        if self.map_context && (self.scan_encoders() || self.map_stage1.iter().any(|b| b.kernel % 2 == 0)) {
+            return Err("map_context: expected odd first-stage kernels (the margin is a whole reach on \
+                        each side) and no encoders of the scan's own"
+                .into());
         }
         if self.joint_filters == 0 || !(self.layer_norm_eps > 0.0 && self.layer_norm_eps.is_finite()) {
             return Err(format!(

@@ -462,7 +462,7 @@ fn encode_tile<'s>(
             encoder.first_stage_of_channel(
                 &model.params,
                 0,
-                &s.tile,
+                (&s.tile, 0),
                 (th, tw),
                 false,
                 &mut s.first,
@@ -494,6 +494,7 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
+    use std::ops::RangeInclusive;
     use std::sync::Arc;
 
     pub(super) struct TestMap {
@@ -600,7 +601,7 @@ mod tests {
                 let mut first = 0;
                 for (bank, local) in built.encoders.iter().zip(model.config.local_maps()) {
                     let what = format!("{spec:?}, {} m pixels", local.cell_m);
-                    let features = (first, bank.feature_len());
+                    let features = (first, bank.feature_len(), 7..=20);
                     assert_aligned_pose_matches(&model, &map, (&built, bank, features), local, &what);
                     first += bank.feature_len();
                 }
@@ -612,13 +613,16 @@ mod tests {
     fn aligned_pose_matches_exact_path_through_first_stage_banks() {
         // A network laying the scan on its local maps: each particle's first stage cropped from
         // the bank plus the scan's share, then the rest of the encoder. The first stage reaches 9
-        // pixels, so the same interior features as above never meet the crop's border.
+        // pixels, so the same interior features as above never meet the crop's border; with
+        // `map_context` the exact path's first stage reads the map there as the bank does, and
+        // every feature matches.
         let wide = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
-        for wide_view in [None, Some(wide)] {
+        for (wide_view, map_context) in [(None, false), (Some(wide), false), (Some(wide), true)] {
             let config = PfNetConfig {
                 local_map: LocalMapSpec { cells: 56, ..LocalMapSpec::default() },
                 obs_cells: 112,
                 scan_on_map: Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: false }),
+                map_context,
                 ..PfNetConfig::compact()
             };
             let model = PfNet::new(config.with_wide_view(wide_view), 4).unwrap();
@@ -632,21 +636,27 @@ mod tests {
             let mut first = 0;
             for (e, local) in model.config.local_maps().into_iter().enumerate() {
                 let bank = &built.encoders[e];
-                let what = format!("first stage, {} m pixels", local.cell_m);
+                let what = format!("first stage, {} m pixels, context {map_context}", local.cell_m);
                 let len = model.map_encoders().nth(e).unwrap().feature_len();
-                assert_aligned_pose_matches(&model, &map, (&built, bank, (first, len)), local, &what);
+                let cells = if map_context { 0..=27 } else { 7..=20 };
+                let features = (first, len, cells);
+                assert_aligned_pose_matches(&model, &map, (&built, bank, features), local, &what);
                 first += len;
             }
         }
     }
 
-    /// At poses facing a bank's orientations whose local maps sit on its grid, the interior
-    /// features of `bank`'s encoder (`len` values from `first` of a pose's features) equal the
-    /// exact path's.
+    /// At poses facing a bank's orientations whose local maps sit on its grid, the features of
+    /// `bank`'s encoder (`len` values from `first` of a pose's features) in rows and columns
+    /// `cells` equal the exact path's.
     fn assert_aligned_pose_matches(
         model: &PfNet,
         map: &TestMap,
-        (built, bank, (first, len)): (&FeatureBank, &EncoderBank, (usize, usize)),
+        (built, bank, (first, len, cells)): (
+            &FeatureBank,
+            &EncoderBank,
+            (usize, usize, RangeInclusive<usize>),
+        ),
         local: LocalMapSpec,
         what: &str,
     ) {
@@ -668,8 +678,8 @@ mod tests {
             let (want, got) = (&want[first..][..len], &got[first..][..len]);
             let mut worst = 0.0f32;
             for ch in 0..len / (half * half) {
-                for i in 7..=20 {
-                    for j in 7..=20 {
+                for i in cells.clone() {
+                    for j in cells.clone() {
                         let k = (ch * half + i) * half + j;
                         worst = worst.max((got[k] - want[k]).abs());
                     }

@@ -21,6 +21,8 @@ pub struct MapEncoder {
     view: usize,
     channels: usize,
     side: usize,
+    /// Pixels of input beyond the local map on every side (`PfNetConfig::map_margin`).
+    margin: usize,
     convs1: Branches,
     norm1: NormRelu,
     convs2: Branches,
@@ -45,6 +47,7 @@ pub struct MapActivations {
     grad_b: Vec<f32>,
     grad_c: Vec<f32>,
     scratch: Vec<f32>,
+    margin_scratch: ChannelScratch,
 }
 
 impl MapEncoder {
@@ -62,12 +65,13 @@ impl MapEncoder {
         let norm1 = NormRelu::new(params, &format!("{prefix}_ln1"), convs1.channels, eps);
         let convs2 = Branches::new(params, &format!("{prefix}2"), convs1.channels, &config.map_stage2, rng);
         let norm2 = NormRelu::new(params, &format!("{prefix}_ln2"), convs2.channels, eps);
-        Self { view, channels, side: config.local_map.cells, convs1, norm1, convs2, norm2 }
+        let (side, margin) = (config.local_map.cells, config.map_margin());
+        Self { view, channels, side, margin, convs1, norm1, convs2, norm2 }
     }
 
     /// Particle i's input: its channels of the i-th particle's input in `maps`.
     fn input<'a>(&self, maps: &'a [f32], n: usize, i: usize) -> &'a [f32] {
-        let (stack, pixels) = (maps.len() / n.max(1), self.side * self.side);
+        let (stack, pixels) = (maps.len() / n.max(1), (self.side + 2 * self.margin).pow(2));
         &maps[i * stack + self.view * self.channels * pixels..][..self.channels * pixels]
     }
 
@@ -84,8 +88,9 @@ impl MapEncoder {
     /// chunk of 8 takes 25 µs per particle vs 47–67 µs over 128: it is bound by where the data sits).
     pub fn forward(&self, p: &Params, maps: &[f32], n: usize, acts: &mut MapActivations) {
         let s = self.side;
-        self.forward_each(p, n, acts, |i, conv1, scratch| {
-            self.convs1.forward(p, self.input(maps, n, i), 1, (s, s), conv1, scratch);
+        self.forward_each(p, n, acts, |i, conv1, scratch, margin_scratch| match self.margin {
+            0 => self.convs1.forward(p, self.input(maps, n, i), 1, (s, s), conv1, scratch),
+            m => self.convs1.forward_on_margin(p, (self.input(maps, n, i), m), (s, s), conv1, margin_scratch),
         });
     }
 
@@ -99,7 +104,7 @@ impl MapEncoder {
         acts: &mut MapActivations,
         mut first_stage: impl FnMut(usize, &mut [f32]),
     ) {
-        self.forward_each(p, n, acts, |i, conv1, _| first_stage(i, conv1));
+        self.forward_each(p, n, acts, |i, conv1, _, _| first_stage(i, conv1));
     }
 
     fn forward_each(
@@ -107,7 +112,7 @@ impl MapEncoder {
         p: &Params,
         n: usize,
         acts: &mut MapActivations,
-        mut first_stage: impl FnMut(usize, &mut [f32], &mut Vec<f32>),
+        mut first_stage: impl FnMut(usize, &mut [f32], &mut Vec<f32>, &mut ChannelScratch),
     ) {
         let (s, h) = (self.side, self.side / 2);
         let (c1, c2) = (self.convs1.channels, self.convs2.channels);
@@ -123,7 +128,7 @@ impl MapEncoder {
             let a = &mut *acts;
             let (big, small, pooled) = (c1 * s * s, c2 * h * h, c1 * h * h);
             let conv1 = &mut a.conv1[i * big..][..big];
-            first_stage(i, conv1, &mut a.scratch);
+            first_stage(i, conv1, &mut a.scratch, &mut a.margin_scratch);
             let norm1 = &mut a.norm1[..big];
             self.norm1.forward(p, conv1, 1, s * s, norm1, &mut a.stats1[i * s * s * 2..][..s * s * 2]);
             let pooled_i = &mut a.pooled[i * pooled..][..pooled];
@@ -146,15 +151,16 @@ impl MapEncoder {
     }
 
     /// The first-stage convolution's response to input channel `channel` alone (biases added if
-    /// `with_bias`): image [h][w] → out [first_stage_channels][h][w]. With the scan laid on the
-    /// map, the map's share (channel 0) of a whole map's window goes into a feature bank once,
-    /// the scan's (channel 1, with the biases) is computed once per observation.
+    /// `with_bias`): image [h + 2m][w + 2m] with `margin` m → out [first_stage_channels][h][w].
+    /// With the scan laid on the map, the map's share (channel 0) of a whole map's window goes
+    /// into a feature bank once, the scan's (channel 1, with the biases, over the encoder's own
+    /// margin) is computed once per observation.
     #[allow(clippy::too_many_arguments)] // inputs, which channel and bias, the output, scratch
     pub fn first_stage_of_channel(
         &self,
         p: &Params,
         channel: usize,
-        image: &[f32],
+        image: (&[f32], usize),
         hw: (usize, usize),
         with_bias: bool,
         out: &mut [f32],
@@ -199,16 +205,18 @@ impl MapEncoder {
             sized(&mut a.grad_a, big); // d conv1 (written by the norm)
             let conv1 = &a.conv1[i * big..][..big];
             self.norm1.backward(p, conv1, stats1, &a.grad_c, 1, s * s, grads, &mut a.grad_a);
-            self.convs1.backward(
-                p,
-                self.input(maps, n, i),
-                1,
-                (s, s),
-                &a.grad_a,
-                grads,
-                None,
-                &mut a.scratch,
-            );
+            let input = self.input(maps, n, i);
+            match self.margin {
+                0 => self.convs1.backward(p, input, 1, (s, s), &a.grad_a, grads, None, &mut a.scratch),
+                m => self.convs1.backward_on_margin(
+                    p,
+                    (input, m),
+                    (s, s),
+                    &a.grad_a,
+                    grads,
+                    &mut a.margin_scratch,
+                ),
+            }
         }
     }
 

@@ -133,7 +133,7 @@ impl PfNet {
     /// scan laid on it: `crop_inputs`), one observation, one particle's map features, one
     /// observation's features.
     pub fn local_map_len(&self) -> usize {
-        self.config.map_channels * self.config.channels_per_local_map() * self.config.local_map.cells.pow(2)
+        self.config.map_channels * self.config.channels_per_local_map() * self.config.map_input_cells().pow(2)
     }
     pub fn obs_len(&self) -> usize {
         self.config.obs_channels * self.config.obs_cells.pow(2)
@@ -254,23 +254,15 @@ impl PfNet {
     pub fn scan_terms(&self, obs: &[f32], terms: &mut [f32], ws: &mut Workspace) {
         assert!(self.banks_hold_first_stage(), "scan_terms: the network lays no scan on its local maps");
         assert_eq!(terms.len(), self.scan_term_len(), "terms hold one observation's scan terms");
-        let pixels = self.config.local_map.cells.pow(2);
-        let side = self.config.local_map.cells;
+        let (side, margin) = (self.config.local_map.cells, self.config.map_margin());
         let mut terms = terms;
         for (view, (encoder, spec)) in self.map_encoders().zip(self.config.local_maps()).enumerate() {
             let (grid, extent_m) = self.grid_of_view(obs, view);
-            sized(&mut ws.laid_scan, pixels);
-            super::scan_on_map::lay_scan(grid, extent_m, &spec, &mut ws.laid_scan);
+            sized(&mut ws.laid_scan, self.config.map_input_cells().pow(2));
+            super::scan_on_map::lay_scan(grid, extent_m, (&spec, margin), &mut ws.laid_scan);
             let (own, rest) = terms.split_at_mut(encoder.first_stage_len());
-            encoder.first_stage_of_channel(
-                &self.params,
-                1,
-                &ws.laid_scan,
-                (side, side),
-                true,
-                own,
-                &mut ws.channel,
-            );
+            let laid = (&ws.laid_scan[..], margin);
+            encoder.first_stage_of_channel(&self.params, 1, laid, (side, side), true, own, &mut ws.channel);
             terms = rest;
         }
     }

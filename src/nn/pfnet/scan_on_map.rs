@@ -15,15 +15,17 @@ use super::spatial_transformer::{LocalMapSpec, MapView, crop_local_map_stack, cr
 const UNKNOWN: f32 = 0.5;
 
 /// Writes the LiDAR grid `grid` (`g × g` cells over `extent_m`, the layout of `LocalGrid`) onto
-/// the pixels of a local map of `spec` (`out`, cells² values): each pixel reads the grid
-/// bilinearly between cell centres at the pixel's centre; beyond the grid it reads unknown.
+/// the pixels of a local map of `spec` and `margin` more pixels on every side (`out`, (cells +
+/// 2·margin)² values): each pixel reads the grid bilinearly between cell centres at the pixel's
+/// centre; beyond the grid it reads unknown.
 ///
 /// # Panics
-/// If `grid` is not square or `out.len() != spec.cells²`.
-pub fn lay_scan(grid: &[f32], extent_m: f32, spec: &LocalMapSpec, out: &mut [f32]) {
+/// If `grid` is not square or `out` is not that many values.
+pub fn lay_scan(grid: &[f32], extent_m: f32, (spec, margin): (&LocalMapSpec, usize), out: &mut [f32]) {
     let g = grid.len().isqrt();
+    let side = spec.cells + 2 * margin;
     assert_eq!(g * g, grid.len(), "a square grid");
-    assert_eq!(out.len(), spec.cells * spec.cells, "out holds one local map");
+    assert_eq!(out.len(), side * side, "out holds one local map and its margin");
     let grid_cell_m = extent_m / g as f32;
     let read = |row: isize, col: isize| match (usize::try_from(row), usize::try_from(col)) {
         (Ok(r), Ok(c)) if r < g && c < g => grid[r * g + c],
@@ -32,11 +34,12 @@ pub fn lay_scan(grid: &[f32], extent_m: f32, spec: &LocalMapSpec, out: &mut [f32
     // A point `forward`, `left` metres from the robot, in grid centre coordinates (cell (r, c)'s
     // centre at the integers).
     let half = g as f32 / 2.0 - 0.5;
-    for (r, row) in out.chunks_exact_mut(spec.cells).enumerate() {
-        let forward = (spec.pixels_ahead() - r as f32 - 0.5) * spec.cell_m;
+    let (ahead, leftmost) = (spec.pixels_ahead() + margin as f32, (spec.cells / 2 + margin) as f32);
+    for (r, row) in out.chunks_exact_mut(side).enumerate() {
+        let forward = (ahead - r as f32 - 0.5) * spec.cell_m;
         let v = half - forward / grid_cell_m;
         for (c, pixel) in row.iter_mut().enumerate() {
-            let left = (spec.cells as f32 / 2.0 - c as f32 - 0.5) * spec.cell_m;
+            let left = (leftmost - c as f32 - 0.5) * spec.cell_m;
             let u = half - left / grid_cell_m;
             let (r0, c0) = (v.floor(), u.floor());
             let (fv, fu) = (v - r0, u - c0);
@@ -49,8 +52,9 @@ pub fn lay_scan(grid: &[f32], extent_m: f32, spec: &LocalMapSpec, out: &mut [f32
 
 impl PfNet {
     /// Every pose's input to the map encoders, `[k][local_map_len]`: its local maps cropped from
-    /// `map` (`PfNetConfig::local_maps`) and, with `scan_on_map`, after each the grid of `obs`
-    /// (one observation image, the one these poses are weighed against) laid on its pixels.
+    /// `map` (`PfNetConfig::local_maps`, with `map_context` each with its margin) and, with
+    /// `scan_on_map`, after each the grid of `obs` (one observation image, the one these poses are
+    /// weighed against) laid on its pixels.
     ///
     /// # Panics
     /// As `crop_local_map_stack`, or if `obs` is not one observation image.
@@ -62,27 +66,36 @@ impl PfNet {
         out: &mut [f32],
     ) {
         let specs = self.config.local_maps();
-        let Some(scan) = self.config.scan_on_map else {
+        let (margin, per_map) = (self.config.map_margin(), self.config.channels_per_local_map());
+        if margin == 0 && per_map == 1 {
             return crop_local_map_stack(map, xs, ys, yaws, &specs, out);
-        };
-        assert_eq!(obs.len(), self.obs_len(), "one observation image");
+        }
+        if per_map > 1 {
+            assert_eq!(obs.len(), self.obs_len(), "one observation image");
+        }
         assert_eq!(out.len(), xs.len() * self.local_map_len(), "out holds poses × local_map_len values");
         if xs.is_empty() {
             return;
         }
-        if scan.own_encoder {
-            return crop_local_map_stack(map, xs, ys, yaws, &specs, out);
-        }
-        let (stack, pixels) = (self.local_map_len(), self.config.local_map.cells.pow(2));
+        let (stack, pixels) = (self.local_map_len(), self.config.map_input_cells().pow(2));
         for (view, spec) in specs.iter().enumerate() {
-            let (grid, extent_m) = self.grid_of_view(obs, view);
-            let (map_at, scan_at) = (2 * view * pixels, (2 * view + 1) * pixels);
+            let map_at = per_map * view * pixels;
             for (i, input) in out.chunks_exact_mut(stack).enumerate() {
-                crop_local_maps(map, &[xs[i]], &[ys[i]], &[yaws[i]], spec, &mut input[map_at..][..pixels]);
+                crop_with_margin(
+                    map,
+                    (xs[i], ys[i], yaws[i]),
+                    (spec, margin),
+                    &mut input[map_at..][..pixels],
+                );
             }
+            if per_map == 1 {
+                continue;
+            }
+            let (grid, extent_m) = self.grid_of_view(obs, view);
+            let scan_at = map_at + pixels;
             let (first, others) = out.split_at_mut(stack);
             let laid = &mut first[scan_at..][..pixels];
-            lay_scan(grid, extent_m, spec, laid);
+            lay_scan(grid, extent_m, (spec, margin), laid);
             for input in others.chunks_exact_mut(stack) {
                 input[scan_at..][..pixels].copy_from_slice(laid);
             }
@@ -105,7 +118,7 @@ impl PfNet {
             obs.chunks_exact(self.obs_len()).flat_map(|one| (0..specs.len()).map(move |view| (one, view)));
         for (out, (one, view)) in laid.zip(views) {
             let (grid, extent_m) = self.grid_of_view(one, view);
-            lay_scan(grid, extent_m, &specs[view], out);
+            lay_scan(grid, extent_m, (&specs[view], 0), out);
         }
     }
 
@@ -119,6 +132,21 @@ impl PfNet {
             _ => unreachable!("a scan is laid on the paper's local map and a wide view's"),
         }
     }
+}
+
+/// The local map of `spec` seen from `pose` and `margin` more pixels on every side: the crop of a
+/// map `2·margin` pixels wider, placed so the particle sits as in `spec`'s.
+fn crop_with_margin(
+    map: &MapView,
+    (x, y, yaw): (f32, f32, f32),
+    (spec, margin): (&LocalMapSpec, usize),
+    out: &mut [f32],
+) {
+    let wider = LocalMapSpec { cells: spec.cells + 2 * margin, ..*spec };
+    // The wider crop's own placement puts the particle `back` pixels too far ahead of its edge.
+    let back = (wider.pixels_ahead() - spec.pixels_ahead() - margin as f32) * spec.cell_m;
+    let (x, y) = (x - back * yaw.cos(), y - back * yaw.sin());
+    crop_local_maps(map, &[x], &[y], &[yaw], &wider, out);
 }
 
 #[cfg(test)]
@@ -148,7 +176,7 @@ mod tests {
     fn fit(scan_from: Pose2, particle: Pose2, spec: &LocalMapSpec) -> (f32, f32) {
         let cells = spec.cells as isize;
         let mut laid = vec![0.0; spec.cells.pow(2)];
-        lay_scan(&grid_at(scan_from), 5.0, spec, &mut laid);
+        lay_scan(&grid_at(scan_from), 5.0, (spec, 0), &mut laid);
         let network = NetworkMap::from_fine(&tiny_room(), 0.1);
         let mut local = vec![0.0; laid.len()];
         crop_local_maps(&map_view(&network), &[particle.x], &[particle.y], &[particle.yaw], spec, &mut local);
@@ -263,7 +291,7 @@ mod tests {
                 let grids = [(&one[..grid_len], 5.0), (&one[one.len() - grid_len..], 10.0)];
                 for (v, (spec, (grid, extent_m))) in specs.iter().zip(grids).enumerate() {
                     let mut want = vec![0.0; pixels];
-                    lay_scan(grid, extent_m, spec, &mut want);
+                    lay_scan(grid, extent_m, (spec, 0), &mut want);
                     assert_eq!(
                         laid[(i * specs.len() + v) * pixels..][..pixels],
                         want,
@@ -287,6 +315,60 @@ mod tests {
             PfNet::new(PfNetConfig { scan_on_map: Some(scan), ..PfNetConfig::compact() }, 3).unwrap();
         let err = one_view.with_wide_view(view).unwrap_err();
         assert!(err.contains("encoders of its own"), "{err}");
+    }
+
+    /// With `map_context` each image of a particle's input is its local map (or laid scan) and
+    /// the first stage's reach of map beyond it on every side: the centre is the image without.
+    #[test]
+    fn a_margin_of_context_surrounds_each_local_map_and_its_scan() {
+        let scan = Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: false });
+        let view = WideView { map_cell_m: 0.2, grid_extent_m: 10.0, own_map_encoder: true };
+        let centred = LocalMapSpec { centred: true, ..LocalMapSpec::default() };
+        let configs = [
+            PfNetConfig { scan_on_map: scan, ..PfNetConfig::compact() }.with_wide_view(Some(view)),
+            PfNetConfig { local_map: centred, ..PfNetConfig::compact() },
+        ];
+        let network = NetworkMap::from_fine(&tiny_room(), 0.1);
+        let (xs, ys, yaws) = ([0.5, 1.2], [0.5, 0.8], [0.0, 1.5]);
+        for (k, config) in configs.into_iter().enumerate() {
+            let plain = PfNet::new(config.clone(), 3).unwrap();
+            let wider = PfNet::new(PfNetConfig { map_context: true, ..config }, 3).unwrap();
+            let obs = test_values(plain.obs_len(), 5).iter().map(|v| v.abs()).collect::<Vec<_>>();
+            let crop = |model: &PfNet| {
+                let mut maps = vec![0.0; 2 * model.local_map_len()];
+                model.crop_inputs(&map_view(&network), (&xs, &ys, &yaws), &obs, &mut maps);
+                maps
+            };
+            let (inner, outer, margin) = (28, wider.config.map_input_cells(), wider.config.map_margin());
+            assert_eq!((margin, outer), (9, 46), "the compact first stage reaches 9 pixels");
+            let (want, got) = (crop(&plain), crop(&wider));
+            let mut beyond = 0.0f32;
+            let per_map = wider.config.channels_per_local_map();
+            let images = want.chunks_exact(inner * inner).zip(got.chunks_exact(outer * outer));
+            for (image, (want, got)) in images.enumerate() {
+                let is_map = image % per_map == 0;
+                for (r, row) in got.chunks_exact(outer).enumerate() {
+                    for (c, &value) in row.iter().enumerate() {
+                        match (r.checked_sub(margin), c.checked_sub(margin)) {
+                            (Some(i), Some(j)) if i < inner && j < inner => {
+                                let expected = want[i * inner + j];
+                                assert!(
+                                    (value - expected).abs() < 1e-5,
+                                    "pixel ({r}, {c}): {value} vs {expected}"
+                                );
+                            }
+                            _ if is_map => beyond = beyond.max(value),
+                            _ => {}
+                        }
+                    }
+                }
+            }
+            // Behind a particle at its local map's bottom edge lies the room's free space (1);
+            // the centred local map already spans the tiny room, its margin lies off the map (0).
+            if k == 0 {
+                assert!(beyond > 0.0, "the margin holds the map, not zero padding");
+            }
+        }
     }
 
     #[test]

@@ -90,26 +90,108 @@ impl Branches {
     }
 }
 
-/// Buffers of [`Branches::forward_input_channel`]: one input channel's kernels, a zero bias, the
-/// convolution's scratch.
+/// Buffers of the branches' passes over an image with a margin: a branch's window of the input,
+/// one input channel's kernels, a zero bias, the convolution's scratch.
 #[derive(Clone, Debug, Default)]
 pub struct ChannelScratch {
+    window: Vec<f32>,
     weight: Vec<f32>,
     bias: Vec<f32>,
     conv: Vec<f32>,
 }
 
+/// How branch `conv` reads one image of `c` channels whose output is `hw` and whose input `x`
+/// ([c][h + 2·margin][w + 2·margin]) holds `margin` more pixels on every side: with no margin, `x`
+/// through the 'same' convolution; else the centre window reaching as far as the branch does
+/// (copied into `window`) through a 'valid' one, so every output reads real pixels where a 'same'
+/// convolution would read zero padding. Returns the convolution, its input and that input's size.
+fn on_margin<'a>(
+    conv: &Conv2d,
+    (x, c): (&'a [f32], usize),
+    ((h, w), margin): ((usize, usize), usize),
+    window: &'a mut Vec<f32>,
+) -> (Conv2d, &'a [f32], (usize, usize)) {
+    let (outer_h, outer_w) = (h + 2 * margin, w + 2 * margin);
+    assert_eq!(x.len(), c * outer_h * outer_w, "one image of {c} channels and its margin");
+    if margin == 0 {
+        return (*conv, x, (h, w));
+    }
+    let reach = (conv.kernel - 1) * conv.dilation / 2;
+    assert!(reach <= margin, "a margin of {margin} pixels for a reach of {reach}");
+    let (wh, ww, skip) = (h + 2 * reach, w + 2 * reach, margin - reach);
+    window.clear();
+    for plane in x.chunks_exact(outer_h * outer_w) {
+        for row in plane.chunks_exact(outer_w).skip(skip).take(wh) {
+            window.extend_from_slice(&row[skip..][..ww]);
+        }
+    }
+    (Conv2d { padding: Padding::Valid, ..*conv }, window, (wh, ww))
+}
+
 impl Branches {
+    /// `forward` over one image holding `margin` pixels beyond its output on every side (see
+    /// `on_margin`): x [c_in][h + 2m][w + 2m] → y [channels][h][w].
+    pub fn forward_on_margin(
+        &self,
+        p: &Params,
+        (x, margin): (&[f32], usize),
+        hw: (usize, usize),
+        y: &mut [f32],
+        scratch: &mut ChannelScratch,
+    ) {
+        let mut offset = 0;
+        for (conv, w, b) in &self.convs {
+            let (conv, input, (ih, iw)) = on_margin(conv, (x, conv.c_in), (hw, margin), &mut scratch.window);
+            conv.forward(p.get(*w), p.get(*b), input, 1, ih, iw, y, self.channels, offset, &mut scratch.conv);
+            offset += conv.c_out;
+        }
+    }
+
+    /// The backward of `forward_on_margin`: accumulates every branch's weight gradients into
+    /// `grads` (the input is data and gets none).
+    pub fn backward_on_margin(
+        &self,
+        p: &Params,
+        (x, margin): (&[f32], usize),
+        hw: (usize, usize),
+        dy: &[f32],
+        grads: &mut [f32],
+        scratch: &mut ChannelScratch,
+    ) {
+        let mut offset = 0;
+        for (conv, w, b) in &self.convs {
+            let (conv, input, (ih, iw)) = on_margin(conv, (x, conv.c_in), (hw, margin), &mut scratch.window);
+            let (dw, db) = p.pair_mut(grads, *w, *b);
+            let weight = p.get(*w);
+            conv.backward(
+                weight,
+                input,
+                1,
+                ih,
+                iw,
+                dy,
+                self.channels,
+                offset,
+                dw,
+                db,
+                None,
+                &mut scratch.conv,
+            );
+            offset += conv.c_out;
+        }
+    }
+
     /// The branches' response to input channel `channel` alone, its biases added if `with_bias`:
-    /// x [h][w] (that channel of one image) → y [channels][h][w]. A convolution is linear in its
-    /// input, so the response to an image is the sum of its channels' responses (one of them with
-    /// the biases): a map encoder reading the map and the scan laid on it can take each apart.
+    /// x [h + 2m][w + 2m] (that channel of one image, with `margin` m as in `forward_on_margin`)
+    /// → y [channels][h][w]. A convolution is linear in its input, so the response to an image
+    /// is the sum of its channels' responses (one of them with the biases): a map encoder reading
+    /// the map and the scan laid on it can take each apart.
     #[allow(clippy::too_many_arguments)] // inputs, which channel and bias, the output, scratch
     pub fn forward_input_channel(
         &self,
         p: &Params,
         channel: usize,
-        x: &[f32],
+        (x, margin): (&[f32], usize),
         hw: (usize, usize),
         with_bias: bool,
         y: &mut [f32],
@@ -130,18 +212,9 @@ impl Branches {
                 false => scratch.bias.resize(conv.c_out, 0.0),
             }
             let one = Conv2d { c_in: 1, ..*conv };
-            one.forward(
-                &scratch.weight,
-                &scratch.bias,
-                x,
-                1,
-                hw.0,
-                hw.1,
-                y,
-                self.channels,
-                offset,
-                &mut scratch.conv,
-            );
+            let (one, input, (ih, iw)) = on_margin(&one, (x, 1), (hw, margin), &mut scratch.window);
+            let (weight, bias) = (&scratch.weight, &scratch.bias);
+            one.forward(weight, bias, input, 1, ih, iw, y, self.channels, offset, &mut scratch.conv);
             offset += conv.c_out;
         }
     }
@@ -354,14 +427,22 @@ mod tests {
 
         let (mut first, mut second) = (vec![f32::NAN; c * h * w], vec![f32::NAN; c * h * w]);
         let mut scratch = ChannelScratch::default();
-        branches.forward_input_channel(&params, 0, &x[..h * w], (h, w), false, &mut first, &mut scratch);
-        branches.forward_input_channel(&params, 1, &x[h * w..], (h, w), true, &mut second, &mut scratch);
+        branches.forward_input_channel(&params, 0, (&x[..h * w], 0), (h, w), false, &mut first, &mut scratch);
+        branches.forward_input_channel(&params, 1, (&x[h * w..], 0), (h, w), true, &mut second, &mut scratch);
         for (k, ((a, b), want)) in first.iter().zip(&second).zip(&whole).enumerate() {
             assert!((a + b - want).abs() < 1e-5, "output {k}: {a} + {b} against {want}");
         }
         // Without its biases a channel's response differs by exactly them.
         let mut unbiased = vec![0.0; c * h * w];
-        branches.forward_input_channel(&params, 1, &x[h * w..], (h, w), false, &mut unbiased, &mut scratch);
+        branches.forward_input_channel(
+            &params,
+            1,
+            (&x[h * w..], 0),
+            (h, w),
+            false,
+            &mut unbiased,
+            &mut scratch,
+        );
         assert!(
             (second[0] - unbiased[0] - 0.3).abs() < 1e-6
                 && (second[c * h * w - 1] - unbiased[c * h * w - 1] + 0.2).abs() < 1e-6

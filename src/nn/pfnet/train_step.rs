@@ -327,11 +327,16 @@ mod tests {
         // gradient, so that the difference stands clear of the f32 forward's rounding. A
         // first-stage weight moves activations across ReLU and pool switches, so its step is
         // smaller, and that rounding then needs a wider tolerance.
+        // With `map_context` the first stage reads its margin: its most dilated branch, which
+        // reaches farthest into it.
         let [plain, scan] = with_and_without_scan_encoders();
+        let laid = Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: false });
+        let context = PfNetConfig { scan_on_map: laid, map_context: true, ..PfNetConfig::compact() };
         let weights = [
             (plain, "j_out/kernel", 1e-2, 2e-2),
             (scan.clone(), "s_c5/kernel", 5e-4, 3e-2),
             (scan, "s2_c3/kernel", 5e-4, 3e-2),
+            (context, "m_c7d3/kernel", 5e-4, 3e-2),
         ];
         for (config, name, h, tolerance) in weights {
             let model = PfNet::new(config, 2).unwrap();

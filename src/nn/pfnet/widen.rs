@@ -78,6 +78,18 @@ impl PfNet {
         }
     }
 
+    /// This network with its map encoders' first stage reading the map beyond the local maps'
+    /// edge or not (`PfNetConfig::map_context`): the same weights (none depends on it) in encoders
+    /// built for that input.
+    ///
+    /// # Errors
+    /// A network that cannot have it (`PfNetConfig::check`).
+    pub fn with_map_context(&self, map_context: bool) -> Result<PfNet, String> {
+        let mut net = PfNet::new(PfNetConfig { map_context, ..self.config.clone() }, 0)?;
+        net.params.values.clone_from(&self.params.values);
+        Ok(net)
+    }
+
     /// A fresh network of `config` holding this one's weights; where a first convolution has more
     /// input channels, the old ones sit from channel `kept_channel` on and the others are zero. A
     /// wide map encoder of its own starts as a copy of the paper one, its features reaching the
