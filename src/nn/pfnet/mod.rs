@@ -2,6 +2,7 @@
 //! encoder, joint stage), the spatial transformer that cuts each particle's local map, the
 //! training loss, and the Keras reference check.
 
+mod banked;
 mod batch;
 mod config;
 mod feature_cache;
