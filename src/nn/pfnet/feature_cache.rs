@@ -37,7 +37,9 @@
 //! 28 × 28 per particle, cell (R, C) centred at (R + ½, C + ½)); the scan's share is computed once
 //! per observation and added to each particle's crop, and the rest of the encoder runs per particle
 //! (`PfNet::log_likelihoods_banked`). What is approximate is what it is above, at the first
-//! convolution's reach (9 pixels) instead of the whole encoder's.
+//! convolution's reach (9 pixels) instead of the whole encoder's; with `PfNetConfig::map_context`
+//! the exact path's first stage reads the map there too, and only the heading residual and the
+//! bilinear sampling of the bank remain (`aligned_pose_matches_exact_path_through_first_stage_banks`).
 //!
 //! Windows are encoded in tiles with a halo wide enough that every kept feature sees exactly what
 //! a one-shot encoding of the window would: memory stays bounded for large maps (the second
