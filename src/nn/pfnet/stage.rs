@@ -351,22 +351,27 @@ mod tests {
     use super::*;
     use crate::world::rng::stream;
     use rand::Rng;
+    use rand_pcg::Pcg64Mcg;
 
     const POOL: MaxPool2d = MaxPool2d { kernel: 3, stride: 2, padding: Padding::Same };
 
-    #[test]
-    fn pooled_branches_match_the_convolutions_then_the_pool() {
-        let mut rng = stream(&[5]);
+    /// Two branches over two input channels, 3 filters of 3 × 3 and 2 of `second`, their biases
+    /// 0.3 and −0.2 (biases count in the forward), and the random stream after their weights.
+    fn two_branches(seed: u64, second: ConvBranch) -> (Params, Branches, Pcg64Mcg) {
+        let mut rng = stream(&[seed]);
         let mut params = Params::new();
-        let stage = [
-            ConvBranch { filters: 3, kernel: 3, dilation: 1 },
-            ConvBranch { filters: 2, kernel: 5, dilation: 2 },
-        ];
+        let stage = [ConvBranch { filters: 3, kernel: 3, dilation: 1 }, ConvBranch { filters: 2, ..second }];
         let branches = Branches::new(&mut params, "t", 2, &stage, &mut rng);
-        for (name, value) in [("t_c3/bias", 0.3), ("t_c5d2/bias", -0.2)] {
-            let id = params.find(name).expect("branch bias"); // biases count in the forward
+        for (branch, value) in stage.iter().zip([0.3, -0.2]) {
+            let id = params.find(&format!("{}/bias", branch.name("t"))).expect("branch bias");
             params.fill(id, value);
         }
+        (params, branches, rng)
+    }
+
+    #[test]
+    fn pooled_branches_match_the_convolutions_then_the_pool() {
+        let (params, branches, mut rng) = two_branches(5, ConvBranch { filters: 2, kernel: 5, dilation: 2 });
         let (n, side, c) = (2, 10, branches.channels);
         let x: Vec<f32> = (0..n * 2 * side * side).map(|_| rng.random_range(-1.0..1.0)).collect();
         let pooled_len = n * c * (side / 2) * (side / 2);
@@ -409,17 +414,7 @@ mod tests {
 
     #[test]
     fn a_convolution_is_the_sum_of_its_input_channels_responses() {
-        let mut rng = stream(&[6]);
-        let mut params = Params::new();
-        let stage = [
-            ConvBranch { filters: 3, kernel: 3, dilation: 1 },
-            ConvBranch { filters: 2, kernel: 7, dilation: 3 },
-        ];
-        let branches = Branches::new(&mut params, "t", 2, &stage, &mut rng);
-        for (name, value) in [("t_c3/bias", 0.3), ("t_c7d3/bias", -0.2)] {
-            let id = params.find(name).expect("branch bias");
-            params.fill(id, value);
-        }
+        let (params, branches, mut rng) = two_branches(6, ConvBranch { filters: 2, kernel: 7, dilation: 3 });
         let (h, w, c) = (9, 12, branches.channels);
         let x: Vec<f32> = (0..2 * h * w).map(|_| rng.random_range(-1.0..1.0)).collect();
         let mut whole = vec![0.0; c * h * w];
@@ -447,5 +442,29 @@ mod tests {
             (second[0] - unbiased[0] - 0.3).abs() < 1e-6
                 && (second[c * h * w - 1] - unbiased[c * h * w - 1] + 0.2).abs() < 1e-6
         );
+    }
+
+    #[test]
+    fn on_a_margin_each_branch_reads_real_pixels_where_same_padding_reads_zeros() {
+        // The centre of a 'same' convolution over the whole image reads no padding where the
+        // margin covers the branches' reach (1 and 3 pixels here): the margin-reading pass must
+        // compute exactly that centre.
+        let (params, branches, mut rng) = two_branches(7, ConvBranch { filters: 2, kernel: 7, dilation: 1 });
+        let (h, w, margin, c) = (6, 8, 3, branches.channels);
+        let (oh, ow) = (h + 2 * margin, w + 2 * margin);
+        let x: Vec<f32> = (0..2 * oh * ow).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let mut whole = vec![0.0; c * oh * ow];
+        branches.forward(&params, &x, 1, (oh, ow), &mut whole, &mut Vec::new());
+        let mut got = vec![f32::NAN; c * h * w];
+        branches.forward_on_margin(&params, (&x, margin), (h, w), &mut got, &mut ChannelScratch::default());
+        for ch in 0..c {
+            for r in 0..h {
+                for col in 0..w {
+                    let (a, b) =
+                        (got[(ch * h + r) * w + col], whole[(ch * oh + r + margin) * ow + col + margin]);
+                    assert!((a - b).abs() < 1e-5, "channel {ch}, pixel ({r}, {col}): {a} vs {b}");
+                }
+            }
+        }
     }
 }
