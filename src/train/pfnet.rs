@@ -276,7 +276,8 @@ impl TrainPfNetConfig {
         }
         if self.scan_on_map.is_some_and(|scan| !scan.own_encoder) && self.features == MapFeatures::Cached {
             return Err("scan_on_map: the map features then change with every scan, so no feature bank \
-                        holds them: expected `features: exact` or `own_encoder: true`"
+                        holds them (the filter's cache holds their first stage; training through it is \
+                        not built): expected `features: exact` or `own_encoder: true`"
                 .into());
         }
         let network = PfNetConfig {

@@ -308,11 +308,10 @@ impl EncoderBank {
         };
         // Cell (i, j) is centred at forward = a − s·i − o, left = n/2 − s·j − o pixels (s pixels
         // per cell, o its centre: 2 and 1.5 for features): affine in (i, j).
-        let (first, left) = (a - centre, n / 2.0 - centre);
-        let first_cell = to_bank(first, left);
-        let next_i = to_bank(first - step, left);
-        let next_j = to_bank(first, left - step);
-        let first = first_cell;
+        let (ahead, left) = (a - centre, n / 2.0 - centre);
+        let first = to_bank(ahead, left);
+        let next_i = to_bank(ahead - step, left);
+        let next_j = to_bank(ahead, left - step);
         let di = [(next_i[0] - first[0]) as f32, (next_i[1] - first[1]) as f32];
         let dj = [(next_j[0] - first[0]) as f32, (next_j[1] - first[1]) as f32];
         let first = [first[0] as f32, first[1] as f32];
