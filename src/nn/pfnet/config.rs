@@ -460,6 +460,18 @@ mod tests {
     }
 
     #[test]
+    fn map_context_reaches_as_far_as_the_first_stage_and_needs_odd_kernels() {
+        let context = PfNetConfig { map_context: true, ..PfNetConfig::paper() };
+        assert_eq!((context.map_margin(), context.map_input_cells()), (9, 46), "7 × 7 dilated 3");
+        assert_eq!(PfNetConfig::paper().map_input_cells(), 28, "no margin without it");
+        let mut even = context.clone();
+        even.map_stage1[0].kernel = 4;
+        assert!(even.check().unwrap_err().starts_with("map_context: expected odd first-stage kernels"));
+        let own = Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: true });
+        assert!(PfNetConfig { scan_on_map: own, ..context }.check().unwrap_err().starts_with("map_context:"));
+    }
+
+    #[test]
     fn local_map_sides_are_checked_by_name() {
         assert!(PfNetConfig::paper().check().is_ok() && PfNetConfig::compact().check().is_ok());
         for (cells, obs_cells) in
