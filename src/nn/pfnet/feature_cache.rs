@@ -59,8 +59,9 @@ use std::f64::consts::TAU;
 /// Feature cells per tile side (plus the halo): the paper's second-stage im2col of one tile then
 /// takes 1,600 taps × 80² pixels ≈ 41 MB per thread.
 const TILE: usize = 64;
-/// Cells of one particle's crop at most (the paper's features 14 × 14, a first stage 28 × 28).
-const MAX_CELLS: usize = super::config::MAX_LOCAL_MAP_CELLS.pow(2);
+/// Cells of a crop whose taps are kept for every channel's plane (a network's features, the
+/// paper's 14 × 14 at most (64 / 2)²); larger crops compute each cell's tap once as they go.
+const PLANE_CELLS: usize = (super::config::MAX_LOCAL_MAP_CELLS / 2).pow(2);
 /// Channels a crop mixes at once.
 const CHANNEL_RUN: usize = 32;
 /// Poses per parallel task of `crop_features`.
@@ -318,19 +319,21 @@ impl EncoderBank {
 
         let (side, c) = (self.side(), self.channels);
         let (max_u, max_v) = ((bank.rows - 1) as f32, (bank.cols - 1) as f32);
-        // Each cell's top-left bank tap and its bilinear fractions.
-        let mut taps = [(0usize, 0.0f32, 0.0f32); MAX_CELLS];
-        for (cell, tap) in taps.iter_mut().take(side * side).enumerate() {
+        // A cell's top-left bank tap and its bilinear fractions.
+        let tap_of = |cell: usize| {
             let (i, j) = ((cell / side) as f32, (cell % side) as f32);
             // `max` first: NaN becomes 0, a corner of the window.
             let u = (first[0] + i * di[0] + j * dj[0]).max(0.0).min(max_u);
             let v = (first[1] + i * di[1] + j * dj[1]).max(0.0).min(max_v);
             let (i0, j0) = ((u as usize).min(bank.rows - 2), (v as usize).min(bank.cols - 2));
-            *tap = ((i0 * bank.cols + j0) * c, u - i0 as f32, v - j0 as f32);
-        }
+            ((i0 * bank.cols + j0) * c, u - i0 as f32, v - j0 as f32)
+        };
         let (below, plane) = (bank.cols * c, side * side);
-        if c < CHANNEL_RUN / 2 {
-            // A few channels (a network's map features): plane by plane, each written in order.
+        if c < CHANNEL_RUN / 2 && plane <= PLANE_CELLS {
+            // A few channels (a network's map features): the taps once, then plane by plane, each
+            // written in order.
+            let mut taps = [(0usize, 0.0f32, 0.0f32); PLANE_CELLS];
+            taps.iter_mut().take(plane).enumerate().for_each(|(cell, tap)| *tap = tap_of(cell));
             for (ch, plane) in out.chunks_exact_mut(plane).enumerate() {
                 let features = &bank.features[ch..];
                 for (value, &(top, fu, fv)) in plane.iter_mut().zip(&taps) {
@@ -345,7 +348,8 @@ impl EncoderBank {
         // Many (a first stage): per cell, its channels' four taps are contiguous runs, mixed a run
         // at a time (vectorised), then scattered to their planes; 10–20 % faster at 24 channels.
         let mut mixed = [0.0f32; CHANNEL_RUN];
-        for (cell, &(top, fu, fv)) in taps[..plane].iter().enumerate() {
+        for cell in 0..plane {
+            let (top, fu, fv) = tap_of(cell);
             for first in (0..c).step_by(CHANNEL_RUN) {
                 let run = CHANNEL_RUN.min(c - first);
                 let tap = |at: usize| &bank.features[at + first..][..run];
