@@ -496,6 +496,7 @@ fn halo(model: &PfNet, depth: Depth) -> usize {
 mod tests {
     use super::super::config::{PfNetConfig, ScanOnMap, WideView};
     use super::super::model::Workspace;
+    use super::super::scan_on_map::crop_with_margin;
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
@@ -719,25 +720,14 @@ mod tests {
 
     /// The encoder without the crop's border: a local map padded by `m` pixels of real context on
     /// every side, encoded, its central features kept. What a bank crop approximates.
-    pub(super) fn with_context(
-        model: &PfNet,
-        map: &MapView,
-        xs: &[f32],
-        ys: &[f32],
-        yaws: &[f32],
-    ) -> Vec<f32> {
+    fn with_context(model: &PfNet, map: &MapView, xs: &[f32], ys: &[f32], yaws: &[f32]) -> Vec<f32> {
         let (n, m) = (model.config.local_map.cells, 16);
         let (side, half, len) = (n + 2 * m, n / 2, model.map_feature_len());
-        let local = model.config.local_map;
-        let spec = LocalMapSpec { cells: side, centred: false, ..local };
         let (mut image, mut acts) = (vec![0.0; side * side], MapActivations::default());
         let mut out = vec![0.0; xs.len() * len];
         for (k, features) in out.chunks_exact_mut(len).enumerate() {
-            // Stepping back m pixels (and n/2 more for a centred map) puts the n-pixel local map
-            // at rows and columns m… of the crop.
-            let back = (m as f32 + n as f32 - local.pixels_ahead()) * spec.cell_m;
-            let (x, y) = (xs[k] - back * yaws[k].cos(), ys[k] - back * yaws[k].sin());
-            crop_local_maps(map, &[x], &[y], &[yaws[k]], &spec, &mut image);
+            let local = (&model.config.local_map, m);
+            crop_with_margin(map, (xs[k], ys[k], yaws[k]), local, &mut image);
             let encoder = model.map_encoders().next().expect("the paper's map encoder");
             encoder.forward_sized(&model.params, &image, 1, (side, side), &mut acts);
             let full = side / 2;

@@ -136,7 +136,7 @@ impl PfNet {
 
 /// The local map of `spec` seen from `pose` and `margin` more pixels on every side: the crop of a
 /// map `2·margin` pixels wider, placed so the particle sits as in `spec`'s.
-fn crop_with_margin(
+pub(super) fn crop_with_margin(
     map: &MapView,
     (x, y, yaw): (f32, f32, f32),
     (spec, margin): (&LocalMapSpec, usize),
