@@ -220,20 +220,27 @@ fn missing_input(model: &PfNet, grid: &LocalGrid, strip: Option<&DepthStrip>) ->
     None
 }
 
+/// The robots `pfnet_likelihood` weighs: what they sense, the map they are on, their filter.
+pub type PfNetRobots<'w, 's> = Query<
+    'w,
+    's,
+    (
+        &'static LocalGrid,
+        Option<&'static DepthStrip>,
+        &'static OnMap,
+        &'static mut ParticleSet,
+        &'static mut FilterHealth,
+        &'static mut LikelihoodStats,
+    ),
+>;
+
 /// Reads LocalGrid and/or DepthStrip (what the network observes), OnMap → the map's NetworkMap,
 /// PfNetLikelihoodParams. Writes ParticleSet
 /// weights, LikelihoodStats, FilterHealth.degeneracies.
 pub fn pfnet_likelihood(
     params: Res<PfNetLikelihoodParams>,
     maps: Query<&NetworkMap>,
-    mut robots: Query<(
-        &LocalGrid,
-        Option<&DepthStrip>,
-        &OnMap,
-        &mut ParticleSet,
-        &mut FilterHealth,
-        &mut LikelihoodStats,
-    )>,
+    mut robots: PfNetRobots,
     mut state: Local<PfNetState>,
 ) {
     let state = &mut *state;
@@ -388,9 +395,10 @@ mod tests {
     use crate::sense::WideGrid;
     use crate::testing::tiny_room;
     use crate::world::FilterRng;
+    use crate::world::OccupancyMap;
     use crate::world::Pose2;
     use crate::world::map::TraversableMap;
-    use bevy::ecs::system::RunSystemOnce;
+    use bevy::ecs::system::{RunSystemOnce, SystemState};
 
     const POSES: [Pose2; 3] =
         [Pose2::new(0.5, 0.5, 0.0), Pose2::new(1.2, 0.8, 1.5), Pose2::new(1.6, 1.1, -2.5)];
@@ -430,7 +438,17 @@ mod tests {
     /// `expected_weights` through the feature banks of `spec` (their first stage and `obs`'s scan
     /// terms for a network laying the scan on its local maps).
     fn expected_cached_weights(model: &PfNet, obs: &[f32], spec: &FeatureCacheSpec) -> Vec<f32> {
-        let map = NetworkMap::from_fine(&tiny_room(), 0.1);
+        expected_cached_weights_on(&tiny_room(), model, obs, spec)
+    }
+
+    /// `expected_cached_weights` with the particles on `room`.
+    fn expected_cached_weights_on(
+        room: &OccupancyMap,
+        model: &PfNet,
+        obs: &[f32],
+        spec: &FeatureCacheSpec,
+    ) -> Vec<f32> {
+        let map = NetworkMap::from_fine(room, 0.1);
         let (xs, ys, yaws) = pose_columns();
         let mut features = vec![0.0; 3 * model.map_feature_len()];
         let bank = FeatureBank::build(model, &map_view(&map), spec);
@@ -738,6 +756,60 @@ mod tests {
             "the pool phases change what the particles see"
         );
         assert!(weights.iter().any(|&w| (w - 1.0 / 3.0).abs() > 1e-4), "the network tells particles apart");
+    }
+
+    /// The feature banks follow the robots: a robot moved to another map is weighed through that
+    /// map's banks, and the map it left, where no robot stands any more, loses its own.
+    #[test]
+    fn pfnet_likelihood_keeps_feature_banks_only_for_maps_robots_stand_on() {
+        let (mut world, robots) = world_with_robots(&[grid(3)], MapFeatures::Cached);
+        let robot = robots[0];
+        let first = world.get::<OnMap>(robot).expect("on a map").0;
+        // The tiny room with its pillar moved to the other side.
+        let other_room = OccupancyMap::from_ascii(
+            0.1,
+            "
+            ####################
+            #..................#
+            #..................#
+            #..................#
+            #....###...........#
+            #....###...........#
+            #....###...........#
+            #..................#
+            #..................#
+            #..................#
+            #..................#
+            #..................#
+            #..................#
+            #..................#
+            ####################
+            ",
+        );
+        let second = world.spawn(NetworkMap::from_fine(&other_room, 0.1)).id();
+        type Params = (Res<'static, PfNetLikelihoodParams>, Query<'static, 'static, &'static NetworkMap>);
+        let mut system = SystemState::<(Params, PfNetRobots, Local<PfNetState>)>::new(&mut world);
+        let mut step = |world: &mut World| {
+            let ((params, maps), robots, state) = system.get_mut(world).expect("valid parameters");
+            pfnet_likelihood(params, maps, robots, state);
+            let (_, _, state) = system.get_mut(world).expect("valid parameters");
+            state.banks.keys().copied().collect::<Vec<_>>()
+        };
+        assert_eq!(step(&mut world), [first], "the first map's banks are built on first use");
+        world.entity_mut(robot).insert((OnMap(second), ParticleSet::from_poses(&POSES)));
+        assert_eq!(step(&mut world), [second], "the map left behind loses its banks");
+
+        let model =
+            shared_model(&PfNetLikelihoodParams { config: "compact".into(), ..Default::default() }).unwrap();
+        let spec = FeatureCacheSpec::default();
+        let weights = world.get::<ParticleSet>(robot).unwrap().weights();
+        let want = expected_cached_weights_on(&other_room, &model, &grid(3).values, &spec);
+        assert!(weights.iter().zip(&want).all(|(w, e)| (w - e).abs() < 1e-5), "{weights:?} vs {want:?}");
+        let first_room = expected_cached_weights(&model, &grid(3).values, &spec);
+        assert!(
+            want.iter().zip(&first_room).any(|(a, b)| (a - b).abs() > 1e-4),
+            "the two rooms must weigh the particles differently"
+        );
     }
 
     #[test]
