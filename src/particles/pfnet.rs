@@ -395,9 +395,9 @@ mod tests {
     use crate::sense::WideGrid;
     use crate::testing::tiny_room;
     use crate::world::FilterRng;
-    use crate::world::OccupancyMap;
     use crate::world::Pose2;
     use crate::world::map::TraversableMap;
+    use crate::world::{Cell, OccupancyMap};
     use bevy::ecs::system::{RunSystemOnce, SystemState};
 
     const POSES: [Pose2; 3] =
@@ -765,27 +765,11 @@ mod tests {
         let (mut world, robots) = world_with_robots(&[grid(3)], MapFeatures::Cached);
         let robot = robots[0];
         let first = world.get::<OnMap>(robot).expect("on a map").0;
-        // The tiny room with its pillar moved to the other side.
-        let other_room = OccupancyMap::from_ascii(
-            0.1,
-            "
-            ####################
-            #..................#
-            #..................#
-            #..................#
-            #....###...........#
-            #....###...........#
-            #....###...........#
-            #..................#
-            #..................#
-            #..................#
-            #..................#
-            #..................#
-            #..................#
-            #..................#
-            ####################
-            ",
-        );
+        // The tiny room with a second pillar on its other side.
+        let mut other_room = tiny_room();
+        for (i, j) in (5..8).flat_map(|i| (8..11).map(move |j| (i, j))) {
+            other_room.set(i, j, Cell::Occupied);
+        }
         let second = world.spawn(NetworkMap::from_fine(&other_room, 0.1)).id();
         type Params = (Res<'static, PfNetLikelihoodParams>, Query<'static, 'static, &'static NetworkMap>);
         let mut system = SystemState::<(Params, PfNetRobots, Local<PfNetState>)>::new(&mut world);
