@@ -394,10 +394,8 @@ mod tests {
     use crate::particles::{RecoveryBeforeUpdateParams, RecoveryState, recovery_before_update};
     use crate::sense::WideGrid;
     use crate::testing::tiny_room;
-    use crate::world::FilterRng;
-    use crate::world::Pose2;
     use crate::world::map::TraversableMap;
-    use crate::world::{Cell, OccupancyMap};
+    use crate::world::{Cell, FilterRng, OccupancyMap, Pose2};
     use bevy::ecs::system::{RunSystemOnce, SystemState};
 
     const POSES: [Pose2; 3] =

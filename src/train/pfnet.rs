@@ -591,11 +591,9 @@ impl TrainState {
                 if let Some(scan) = config.scan_on_map {
                     model = model.with_scan_on_map(scan).map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
                 }
-                if model.config.map_context != config.map_context {
-                    model = model
-                        .with_map_context(config.map_context)
-                        .map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
-                }
+                model = model
+                    .with_map_context(config.map_context)
+                    .map_err(|e| anyhow::anyhow!("init: {path}: {e}"))?;
                 anyhow::ensure!(
                     model.config == network,
                     "init: {path} holds another network than `network: {}` observing `{}`",

@@ -79,12 +79,15 @@ impl PfNet {
     }
 
     /// This network with its map encoders' first stage reading the map beyond the local maps'
-    /// edge or not (`PfNetConfig::map_context`): the same weights (none depends on it) in encoders
-    /// built for that input.
+    /// edge or not (`PfNetConfig::map_context`): itself if it already does, else the same weights
+    /// (none depends on it) in encoders built for that input.
     ///
     /// # Errors
     /// A network that cannot have it (`PfNetConfig::check`).
     pub fn with_map_context(&self, map_context: bool) -> Result<PfNet, String> {
+        if self.config.map_context == map_context {
+            return Ok(self.clone());
+        }
         let mut net = PfNet::new(PfNetConfig { map_context, ..self.config.clone() }, 0)?;
         net.params.values.clone_from(&self.params.values);
         Ok(net)
