@@ -203,6 +203,11 @@ impl FeatureBank {
         self.encoders.first().is_some_and(|bank| bank.depth == Depth::FirstStage)
     }
 
+    /// The orientation whose banks a particle heading `yaw` crops (every encoder holds the same).
+    pub fn orientation_of(&self, yaw: f32) -> usize {
+        self.encoders.first().map_or(0, |bank| bank.nearest_orientation(f64::from(yaw)))
+    }
+
     /// Map encoder `encoder`'s first-stage response to the map at one pose (world x, y, yaw) →
     /// out [channels][n][n], the layout of the exact path's first convolution without the scan
     /// and the biases.
@@ -285,11 +290,15 @@ impl EncoderBank {
         self.channels * self.side().pow(2)
     }
 
+    /// The orientation whose window a particle heading `yaw` crops (a NaN heading crops the first).
+    fn nearest_orientation(&self, yaw: f64) -> usize {
+        let count = self.orientations.len();
+        ((yaw * count as f64 / TAU).round() as i64).rem_euclid(count as i64) as usize
+    }
+
     fn crop_one(&self, x: f32, y: f32, yaw: f32, out: &mut [f32]) {
         let (x, y, yaw) = (f64::from(x), f64::from(y), f64::from(yaw));
-        let count = self.orientations.len();
-        let nearest = ((yaw * count as f64 / TAU).round() as i64).rem_euclid(count as i64) as usize;
-        let bank = &self.orientations[nearest];
+        let bank = &self.orientations[self.nearest_orientation(yaw)];
         let (sin, cos) = yaw.sin_cos();
         // The pixels between the particle and the map's far edge: n, or n/2 when centred.
         let (n, a, d) =
@@ -613,6 +622,60 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// `log_likelihoods_banked` crops a two-robot global belief in its own order (`crop_order`)
+    /// and must return each particle exactly what the particles taken as they come, chunk by
+    /// chunk as the rayon tasks take them, give.
+    #[test]
+    fn banked_likelihoods_in_crop_order_equal_those_in_particle_order() {
+        use super::super::batch::{MAP_ENCODER_CHUNK, PARTICLE_CHUNK, Workspaces, crop_order};
+        let scan_on_map = Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: false });
+        let model = PfNet::new(PfNetConfig { scan_on_map, ..PfNetConfig::compact() }, 3).unwrap();
+        let spec = FeatureCacheSpec { orientations: 8, pool_phases: false };
+        let banks = [1, 2].map(|seed| Arc::new(FeatureBank::build(&model, &room(seed).view(), &spec)));
+        let mut rng = Pcg64::seed_from_u64(9);
+        let n = 2 * PARTICLE_CHUNK + 44; // the last task short
+        let poses: Vec<[f32; 3]> = (0..n)
+            .map(|_| [rng.random_range(-0.5..3.0), rng.random_range(0.5..3.5), rng.random_range(-3.2..3.2)])
+            .collect();
+        let owner: Vec<u32> = (0..n).map(|_| rng.random_range(0..2)).collect();
+        let order = crop_order(&poses, &owner, &banks);
+        assert!(order.iter().enumerate().any(|(k, &i)| i as usize != k), "the order must differ");
+
+        let mut ws = Workspace::default();
+        let obs: Vec<f32> = [observation(&model), observation(&model).into_iter().rev().collect()].concat();
+        let mut obs_terms = vec![0.0; 2 * model.obs_term_len()];
+        model.observation_terms(&obs, 2, &mut obs_terms, &mut ws);
+        let mut scan_terms = vec![0.0; 2 * model.scan_term_len()];
+        for (one, terms) in obs.chunks(model.obs_len()).zip(scan_terms.chunks_mut(model.scan_term_len())) {
+            model.scan_terms(one, terms, &mut ws);
+        }
+        let mut got = vec![f32::NAN; n];
+        let terms = (&obs_terms[..], &scan_terms[..]);
+        model.log_likelihoods_banked(
+            terms,
+            &owner,
+            (&poses, &banks),
+            &mut got,
+            &Workspaces::for_current_pool(),
+        );
+
+        let (flen, mut want) = (model.map_feature_len(), vec![f32::NAN; n]);
+        for ((poses, owner), out) in poses
+            .chunks(PARTICLE_CHUNK)
+            .zip(owner.chunks(PARTICLE_CHUNK))
+            .zip(want.chunks_mut(PARTICLE_CHUNK))
+        {
+            let mut features = vec![0.0; poses.len() * flen];
+            let subs = poses.chunks(MAP_ENCODER_CHUNK).zip(owner.chunks(MAP_ENCODER_CHUNK));
+            for (sub, part) in subs.zip(features.chunks_mut(MAP_ENCODER_CHUNK * flen)) {
+                model.encode_banked(sub, (&banks, &scan_terms), part, &mut ws);
+            }
+            model.joint_log_likelihoods(&features, &obs_terms, owner, out, &mut ws);
+        }
+        assert!(want.iter().all(|l| l.is_finite()));
+        assert_eq!(got, want, "to the bit");
     }
 
     #[test]
