@@ -4,6 +4,7 @@
 
 use super::feature_cache::FeatureBank;
 use super::model::{PfNet, Workspace};
+use crate::nn::buffers::sized;
 use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::Mutex;
@@ -20,12 +21,15 @@ pub const MAP_ENCODER_CHUNK: usize = 8;
 #[derive(Debug, Default)]
 pub struct Workspaces {
     slots: Vec<Mutex<Workspace>>,
+    /// `log_likelihoods_banked`'s particles in crop order.
+    crop_order: Mutex<CropOrder>,
 }
 
 impl Workspaces {
     /// One slot per thread of the current rayon pool (plus one for callers outside it).
     pub fn for_current_pool() -> Self {
-        Self { slots: (0..=rayon::current_num_threads()).map(|_| Mutex::default()).collect() }
+        let slots = (0..=rayon::current_num_threads()).map(|_| Mutex::default()).collect();
+        Self { slots, crop_order: Mutex::default() }
     }
 
     /// Runs `f` with the calling thread's workspace.
@@ -40,20 +44,41 @@ impl Workspaces {
 /// still share most of their windows' rows.
 const CROP_STRIP_M: f32 = 0.5;
 
-/// The order in which `log_likelihoods_banked` crops its particles: by robot, bank orientation,
-/// strip of the map and x. A global belief's particles, taken as they come, jump across the whole
-/// bank (hundreds of MB per map) from one crop to the next; in this order consecutive crops read
-/// overlapping windows still in cache. Each particle's arithmetic does not depend on its
-/// neighbours, so the order changes no value.
-pub(super) fn crop_order(poses: &[[f32; 3]], owner: &[u32], banks: &[Arc<FeatureBank>]) -> Vec<u32> {
-    let mut order: Vec<u32> = (0..poses.len() as u32).collect();
-    order.sort_by_cached_key(|&i| {
-        let ([x, y, yaw], robot) = (poses[i as usize], owner[i as usize]);
-        // `as` saturates, and sends a NaN coordinate to 0: any place in the order will do.
-        let (strip, centimetres) = ((y / CROP_STRIP_M).floor() as i32, (x * 100.0).floor() as i32);
-        (robot, banks[robot as usize].orientation_of(yaw), strip, centimetres)
-    });
-    order
+/// The order in which `log_likelihoods_banked` crops its particles, and the particles in it: by
+/// robot, bank orientation, strip of the map and x. A global belief's particles, taken as they
+/// come, jump across the whole bank (hundreds of MB per map) from one crop to the next; in this
+/// order consecutive crops read overlapping windows still in cache. Each particle's arithmetic
+/// does not depend on its neighbours, so the order changes no value.
+#[derive(Debug, Default)]
+pub(super) struct CropOrder {
+    /// (robot, orientation, strip, x in cm, particle), sorted.
+    keys: Vec<(u32, usize, i32, i32, u32)>,
+    poses: Vec<[f32; 3]>,
+    owner: Vec<u32>,
+    loglik: Vec<f32>,
+}
+
+impl CropOrder {
+    /// Sorts `poses` (of robots `owner`, cropping `banks[owner[i]]`) into crop order.
+    pub(super) fn sort(&mut self, poses: &[[f32; 3]], owner: &[u32], banks: &[Arc<FeatureBank>]) {
+        self.keys.clear();
+        self.keys.extend(poses.iter().zip(owner).enumerate().map(|(i, (&[x, y, yaw], &robot))| {
+            // `as` saturates, and sends a NaN coordinate to 0: any place in the order will do.
+            let (strip, centimetres) = ((y / CROP_STRIP_M).floor() as i32, (x * 100.0).floor() as i32);
+            (robot, banks[robot as usize].orientation_of(yaw), strip, centimetres, i as u32)
+        }));
+        self.keys.sort_unstable(); // every key differs in its particle, so the order is total
+        self.poses.clear();
+        self.poses.extend(self.keys.iter().map(|key| poses[key.4 as usize]));
+        self.owner.clear();
+        self.owner.extend(self.keys.iter().map(|key| key.0));
+    }
+
+    /// Whether the order differs from the particles' own.
+    #[cfg(test)]
+    pub(super) fn moves_any(&self) -> bool {
+        self.keys.iter().enumerate().any(|(k, key)| key.4 as usize != k)
+    }
 }
 
 impl PfNet {
@@ -116,7 +141,7 @@ impl PfNet {
 
     /// Log-likelihoods of every particle (world x, y, yaw in `poses`) from the first-stage banks
     /// of its robot's map (`banks[owner[i]]`) and that robot's scan terms (the cached path of a
-    /// network laying the scan on its local maps), same ownership rule.
+    /// network laying the scan on its local maps), same ownership rule; cropped in `CropOrder`.
     pub fn log_likelihoods_banked(
         &self,
         (obs_terms, scan_terms): (&[f32], &[f32]),
@@ -126,10 +151,11 @@ impl PfNet {
         pool: &Workspaces,
     ) {
         let flen = self.map_feature_len();
-        let order = crop_order(poses, owner, banks);
-        let poses: Vec<[f32; 3]> = order.iter().map(|&i| poses[i as usize]).collect();
-        let owner: Vec<u32> = order.iter().map(|&i| owner[i as usize]).collect();
-        let mut sorted = vec![0.0; loglik.len()];
+        let mut order = pool.crop_order.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        order.sort(poses, owner, banks);
+        let CropOrder { keys, poses, owner, loglik: sorted } = &mut *order;
+        let (poses, owner) = (&poses[..], &owner[..]);
+        sized(sorted, loglik.len());
         sorted.par_chunks_mut(PARTICLE_CHUNK).enumerate().for_each(|(c, out)| {
             let first = c * PARTICLE_CHUNK;
             let (poses, owners) = (&poses[first..first + out.len()], &owner[first..first + out.len()]);
@@ -144,8 +170,8 @@ impl PfNet {
                 ws.chunk_map_features = features;
             });
         });
-        for (&i, &value) in order.iter().zip(&sorted) {
-            loglik[i as usize] = value;
+        for (key, &value) in keys.iter().zip(sorted.iter()) {
+            loglik[key.4 as usize] = value;
         }
     }
 

@@ -624,12 +624,12 @@ mod tests {
         }
     }
 
-    /// `log_likelihoods_banked` crops a two-robot global belief in its own order (`crop_order`)
+    /// `log_likelihoods_banked` crops a two-robot global belief in its own order (`CropOrder`)
     /// and must return each particle exactly what the particles taken as they come, chunk by
     /// chunk as the rayon tasks take them, give.
     #[test]
     fn banked_likelihoods_in_crop_order_equal_those_in_particle_order() {
-        use super::super::batch::{MAP_ENCODER_CHUNK, PARTICLE_CHUNK, Workspaces, crop_order};
+        use super::super::batch::{CropOrder, MAP_ENCODER_CHUNK, PARTICLE_CHUNK, Workspaces};
         let scan_on_map = Some(ScanOnMap { grid_extent_m: 5.0, own_encoder: false });
         let model = PfNet::new(PfNetConfig { scan_on_map, ..PfNetConfig::compact() }, 3).unwrap();
         let spec = FeatureCacheSpec { orientations: 8, pool_phases: false };
@@ -640,8 +640,9 @@ mod tests {
             .map(|_| [rng.random_range(-0.5..3.0), rng.random_range(0.5..3.5), rng.random_range(-3.2..3.2)])
             .collect();
         let owner: Vec<u32> = (0..n).map(|_| rng.random_range(0..2)).collect();
-        let order = crop_order(&poses, &owner, &banks);
-        assert!(order.iter().enumerate().any(|(k, &i)| i as usize != k), "the order must differ");
+        let mut order = CropOrder::default();
+        order.sort(&poses, &owner, &banks);
+        assert!(order.moves_any(), "the order must differ from the particles' own");
 
         let mut ws = Workspace::default();
         let obs: Vec<f32> = [observation(&model), observation(&model).into_iter().rev().collect()].concat();
