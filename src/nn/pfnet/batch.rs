@@ -40,7 +40,7 @@ impl Workspaces {
     }
 }
 
-/// Metres per strip of `crop_order`: a first-stage crop spans 2.8 m, so particles a strip apart
+/// Metres per strip of `CropOrder`: a first-stage crop spans 2.8 m, so particles a strip apart
 /// still share most of their windows' rows.
 const CROP_STRIP_M: f32 = 0.5;
 
