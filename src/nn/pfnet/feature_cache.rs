@@ -417,6 +417,8 @@ fn prefetch(run: &[f32]) {
             _mm_prefetch::<_MM_HINT_T0>(run.as_ptr_range().end.wrapping_sub(1).cast());
         }
     }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = run; // std has no portable prefetch: the hardware's own prefetcher is left to it
 }
 
 /// Renders the window of heading `heading` (map + margin) at `local`'s pixels and encodes it tile
