@@ -316,6 +316,9 @@ fn train_sac_keeps_snapshots_and_extends_a_finished_run() {
     let log = std::fs::read_to_string(out.join("train_log.csv")).unwrap();
     let steps: Vec<&str> = log.lines().skip(1).map(|l| l.split(',').next().unwrap()).collect();
     assert_eq!(steps, ["4", "8", "12", "16", "20", "24"], "the extended run continues the log");
+    let wall: Vec<f64> =
+        log.lines().skip(1).map(|l| l.rsplit(',').next().unwrap().parse().unwrap()).collect();
+    assert!(wall.windows(2).all(|w| w[0] < w[1]), "the extended run continues the clock: {wall:?}");
     let mut straight = SacTrainer::new(config.clone(), &path).unwrap();
     while straight.step < 24 {
         straight.step();

@@ -66,6 +66,8 @@ pub fn run(args: TrainSacArgs) -> anyhow::Result<()> {
     };
     let mut rows: Vec<LogRow> = if args.resume { read_log(&log_path)? } else { vec![] };
     rows.retain(|r| r.step <= trainer.step);
+    // A resumed run's clock continues from its last row, so `wall_s` is the run's whole cost.
+    let wall_before = rows.last().map_or(0.0, |r| r.wall_s);
     let replay_mb = trainer.agent().replay.memory_bytes() as f64 / 1e6;
     println!(
         "training {} SAC from step {} to {}; replay buffer of {} transitions holds {replay_mb:.0} MB",
@@ -82,7 +84,7 @@ pub fn run(args: TrainSacArgs) -> anyhow::Result<()> {
         window.drain(&mut trainer);
         bar.set_position(trainer.step);
         if trainer.step % trainer.config.log_every == 0 || trainer.step == trainer.config.steps {
-            let row = window.row(&trainer, last_log, started.elapsed().as_secs_f64());
+            let row = window.row(&trainer, last_log, wall_before + started.elapsed().as_secs_f64());
             anyhow::ensure!(
                 row.critic_loss.is_finite(),
                 "training diverged at step {}: critic loss {}",
